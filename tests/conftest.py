@@ -1,0 +1,40 @@
+"""Shared fixtures: data location, deterministic per-test PRNG keys, float64 switch."""
+
+from __future__ import annotations
+
+import os
+import zlib
+from pathlib import Path
+
+import jax
+import pytest
+
+# Persistent compilation cache: repeated test runs do not recompile.
+jax.config.update("jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache"))
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    """The shared light-field data folder; fails loudly when absent (CI has it)."""
+    if not DATA.is_dir():
+        pytest.fail(f"shared data not found at {DATA}; set MVEDGE_DATA")
+    return DATA
+
+
+@pytest.fixture
+def key(request) -> jax.Array:
+    """A PRNG key that is deterministic per test (crc32 of the node id, not hash())."""
+    return jax.random.key(zlib.crc32(request.node.nodeid.encode()))
+
+
+@pytest.fixture
+def x64():
+    """Enable float64 for the duration of a test (gradient checks)."""
+    jax.config.update("jax_enable_x64", True)
+    try:
+        yield
+    finally:
+        jax.config.update("jax_enable_x64", False)
