@@ -1,0 +1,181 @@
+"""Command line: ``mvedge <command>``.
+
+Add a command with ``@main.command()``; reuse `light_field_options` for the input options
+(``PATH``, ``--views``, ``--scale``, ``--transpose``) and `load_or_exit` to load with clean
+error messages.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import time
+from collections.abc import Callable
+
+import click
+import numpy as np
+
+from .io import LayoutInfo, load_light_field_with_info
+from .lightfield import LightField
+
+
+class _ViewsParam(click.ParamType):
+    """``7x7``, ``7X5`` or ``7`` → ``(7, 7)``, ``(7, 5)``, ``(7, 7)``."""
+
+    name = "UxV"
+
+    def convert(self, value, param, ctx):
+        if value is None or isinstance(value, tuple):
+            return value
+        text = str(value).strip().lower().replace("×", "x")
+        parts = text.split("x")
+        try:
+            nums = tuple(int(p) for p in parts)
+        except ValueError:
+            self.fail(f"expected UxV (e.g. 7x7) or a single number; got {value!r}", param, ctx)
+        if len(nums) == 1:
+            nums = (nums[0], nums[0])
+        if len(nums) != 2 or min(nums) < 1:
+            self.fail(f"expected UxV (e.g. 7x7) or a single number; got {value!r}", param, ctx)
+        return nums
+
+
+VIEWS = _ViewsParam()
+
+
+def light_field_options(fn: Callable) -> Callable:
+    """Decorator: the ``PATH`` argument and the ``--views/--scale/--transpose`` options."""
+
+    @click.argument("path", type=click.Path(path_type=str))
+    @click.option(
+        "--views",
+        type=VIEWS,
+        default=None,
+        help="Use the central UxV views only, e.g. 7x7 (or 7).",
+    )
+    @click.option(
+        "--scale",
+        type=click.FloatRange(0.0, 1.0, min_open=True),
+        default=None,
+        help="Spatial downscale factor in (0, 1], e.g. 0.5 (INTER_AREA; GT scaled too).",
+    )
+    @click.option(
+        "--transpose/--no-transpose",
+        default=None,
+        help="View grids: force swapping/keeping the file's RR/CC indices (default: decide "
+        "from the parallax).",
+    )
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def load_or_exit(
+    path: str, views=None, scale=None, transpose=None
+) -> tuple[LightField, LayoutInfo, float]:
+    """Load a light field; on bad input exit with the loader's message (no traceback).
+
+    Returns:
+        ``(light_field, info, seconds)``.
+    """
+    t0 = time.perf_counter()
+    try:
+        lf, info = load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)
+    except (FileNotFoundError, NotADirectoryError, ValueError) as e:
+        raise click.ClickException(str(e)) from None
+    return lf, info, time.perf_counter() - t0
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """mvedge: multi-view edge depth for 4D light fields (JAX)."""
+
+
+def _fmt_range(lo: float, hi: float) -> str:
+    return f"[{lo:.3f}, {hi:.3f}]"
+
+
+def _grid_map(mask: np.ndarray) -> list[str]:
+    return [" ".join("#" if m else "." for m in row) for row in mask]
+
+
+def info_lines(lf: LightField, info: LayoutInfo, seconds: float | None = None) -> list[str]:
+    """The report of ``mvedge info`` as lines (``key  value``)."""
+    U, V = lf.grid
+    H, W = lf.size
+    mask = np.asarray(lf.view_mask)
+    rc, cc = lf.centre_index
+    out = [("path", info.folder), ("layout", f"{info.layout}  ({info.pattern})")]
+    grid = f"{U}x{V} views (U x V), {int(mask.sum())} of {U * V} present, centre ({rc}, {cc})"
+    if info.window is not None:
+        r0, c0, u, v = info.window
+        grid += (
+            f"; central crop of the {info.grid[0]}x{info.grid[1]} grid "
+            f"(rows {r0}-{r0 + u - 1}, cols {c0}-{c0 + v - 1})"
+        )
+    out.append(("grid", grid))
+    if not mask.all():
+        out += [("views present" if i == 0 else "", row) for i, row in enumerate(_grid_map(mask))]
+    size = f"{H}x{W} px (H x W)"
+    if info.scale is not None and info.image_size is not None:
+        size += f", scaled by {info.scale:g} from {info.image_size[0]}x{info.image_size[1]}"
+    out.append(("size", size))
+    if lf.gt_disparity is None:
+        out.append(("ground truth", "none"))
+    else:
+        gtm = np.asarray(lf.gt_mask)
+        has = [tuple(int(i) for i in p) for p in np.argwhere(gtm.any(axis=(2, 3)))]
+        has.sort(key=lambda p: p != (rc, cc))  # centre view first
+        gt = np.asarray(lf.gt_disparity)
+        shown, rest = has[:3], has[3:]
+        for i, (r, c) in enumerate(shown):
+            valid = gtm[r, c]
+            vals = gt[r, c][valid]
+            rng = _fmt_range(float(vals.min()), float(vals.max())) if vals.size else "n/a"
+            label = "centre view" if (r, c) == (rc, cc) else "view"
+            out.append(
+                (
+                    "ground truth" if i == 0 else "",
+                    f"{label} ({r}, {c}): disparity {rng} px/view, "
+                    f"{100.0 * float(valid.mean()):.1f}% valid",
+                )
+            )
+        if rest:
+            sel = np.zeros(gtm.shape[:2], bool)
+            sel[tuple(np.array(rest).T)] = True
+            vals = gt[sel][gtm[sel]]
+            rng = _fmt_range(float(vals.min()), float(vals.max())) if vals.size else "n/a"
+            out.append(
+                (
+                    "",
+                    f"and {len(rest)} more views: disparity {rng} px/view, "
+                    f"{100.0 * float(gtm[sel].mean()):.1f}% valid",
+                )
+            )
+    if lf.disparity_range is None:
+        out.append(("disparity range", "unknown (no metadata)"))
+    else:
+        lo, hi = lf.disparity_range
+        out.append(("disparity range", f"{_fmt_range(lo, hi)} px/view (metadata)"))
+    out.append(("memory", f"{lf.views.size * 4 / 2**20:.0f} MiB of views (float32)"))
+    for i, note in enumerate(info.notes):
+        out.append(("notes" if i == 0 else "", note))
+    if seconds is not None:
+        out.append(("load time", f"{seconds:.2f} s"))
+    width = max(len(k) for k, _ in out)
+    return [f"{k:<{width}}  {v}" for k, v in out]
+
+
+@main.command()
+@light_field_options
+def info(path: str, views, scale, transpose) -> None:
+    """Describe the light field in PATH: layout, grid, size, ground truth, disparity range."""
+    lf, layout, seconds = load_or_exit(path, views, scale, transpose)
+    for line in info_lines(lf, layout, seconds):
+        click.echo(line)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main(prog_name=os.path.basename(__file__))
