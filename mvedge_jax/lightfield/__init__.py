@@ -1,9 +1,9 @@
-"""Light-field container, EPI slicing and colour conversion."""
+"""Light-field container, EPI slicing, colour conversion and view warping."""
 
 from ._colour import rgb_to_lab as rgb_to_lab
-from ._lightfield import (
-    LightField as LightField,
-    horizontal_epis as horizontal_epis,
-    vertical_epis as vertical_epis,
-    view_offsets as view_offsets,
-)
+from ._lightfield import LightField as LightField
+from ._lightfield import horizontal_epis as horizontal_epis
+from ._lightfield import vertical_epis as vertical_epis
+from ._lightfield import view_offsets as view_offsets
+from ._warp import backward_warp as backward_warp
+from ._warp import forward_project as forward_project

@@ -30,7 +30,9 @@ def rgb_to_lab(rgb: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
         ``(..., 3)`` array of ``(L*, a*, b*)``, same dtype as the input.
     """
     rgb = jnp.asarray(rgb)
-    lin = jnp.where(rgb > 0.04045, ((jnp.maximum(rgb, 0.04045) + 0.055) / 1.055) ** 2.4, rgb / 12.92)
+    lin = jnp.where(
+        rgb > 0.04045, ((jnp.maximum(rgb, 0.04045) + 0.055) / 1.055) ** 2.4, rgb / 12.92
+    )
     xyz = lin @ _RGB_TO_XYZ.T.astype(lin.dtype)
     t = xyz / _WHITE_D65.astype(lin.dtype)
     eps = (6.0 / 29.0) ** 3
