@@ -62,7 +62,8 @@ class LightField(eqx.Module):
             raise ValueError("LightField.gt_mask and gt_disparity must be given together")
         if self.gt_mask is not None and tuple(self.gt_mask.shape) != (U, V, H, W):
             raise ValueError(
-                f"LightField.gt_mask must have shape {(U, V, H, W)}; got {tuple(self.gt_mask.shape)}"
+                f"LightField.gt_mask must have shape {(U, V, H, W)}; "
+                f"got {tuple(self.gt_mask.shape)}"
             )
         # Concrete checks only (skipped while tracing, e.g. under jit/vmap).
         try:
