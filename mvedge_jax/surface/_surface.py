@@ -1,0 +1,259 @@
+"""Surface vectors by bidirectional diffusion and depth-edge confidence (thesis Ch. 4.2–4.3)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.scipy.ndimage import map_coordinates
+from jaxtyping import Array, Float
+
+from ..edges import EdgeSet
+from ..lightfield import rgb_to_lab
+from ..solve import SolverConfig, guide_edge_weights, solve_poisson
+
+_f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+
+# Step filter across the point: the authors' 6 taps at offsets -3..-1, +1..+3 along n
+# (SPEC §2: [-1, -1.5, -2, 2, 1.5, 1] over 7 samples, the centre sample unused).
+_PROFILE_T = (-3.0, -2.0, -1.0, 1.0, 2.0, 3.0)
+_PROFILE_F = (-1.0, -1.5, -2.0, 2.0, 1.5, 1.0)
+
+
+class SurfaceConfig(eqx.Module):
+    """Parameters of `surface_vectors`.
+
+    Attributes:
+        data_weight: weight of a splatted label in the diffusion (thesis: 1e6, i.e. a hard
+            constraint; 1e3 is already ~20× the largest smoothness weight and keeps the
+            float32 system well conditioned).
+        smooth_scale: numerator ``c`` of the smoothness ``c / (|∇I| + ε)``.
+        smooth_eps: ``ε`` of the smoothness, in CIELAB/100 units.
+        gradient_sigma: Gaussian pre-blur (pixels) of the centre view for the gradient
+            direction ``n`` (measured on backgammon/antinous with detected edges: 88%/90% correct sides,
+            against 81%/90% at 1.0).
+        offset: distance (pixels) of the forward/backward splat from the point (thesis: 1).
+        confidence_scale: disparity gradient (pixels per view step per pixel) at which the
+            depth-edge confidence reaches ``1 - 1/e``.
+        blur_radius: support radius (pixels) of that blur (static).
+        solver: configuration of the two Poisson solves.
+
+    Raises:
+        ValueError: on non-positive weights, ``ε``, offset or scale.
+    """
+
+    data_weight: Array = eqx.field(converter=_f32, default=1e3)
+    smooth_scale: Array = eqx.field(converter=_f32, default=1.0)
+    smooth_eps: Array = eqx.field(converter=_f32, default=0.02)
+    gradient_sigma: Array = eqx.field(converter=_f32, default=2.5)
+    offset: Array = eqx.field(converter=_f32, default=1.0)
+    confidence_scale: Array = eqx.field(converter=_f32, default=0.05)
+    blur_radius: int = eqx.field(static=True, default=8)
+    solver: SolverConfig = SolverConfig()
+
+    def __check_init__(self):
+        for name in ("data_weight", "smooth_scale", "smooth_eps", "offset", "confidence_scale"):
+            try:
+                v = float(getattr(self, name))
+            except Exception:  # traced (e.g. under vmap over hyperparameters)
+                continue
+            if not v > 0:
+                raise ValueError(f"SurfaceConfig.{name} must be > 0; got {v}")
+
+
+class SurfaceResult(eqx.Module):
+    """Output of `surface_vectors`.
+
+    Attributes:
+        offset: ``(N, 2)`` float32 ``(dx, dy)``, unit vector from each edge point towards the
+            surface its label belongs to; ``(0, 0)`` for invalid points.
+        step_response: ``(N,)`` float32 >= 0, λ_e of eq 6.3: the strongest step-filter
+            response across the point in the two diffusions (pixels per view step).
+        normal: ``(N, 2)`` float32 unit image-gradient direction ``n`` at each point.
+        depth_edge_confidence: ``(H, W)`` float32 in [0, 1] (thesis Fig. 4.7).
+        forward: ``(H, W)`` diffusion of the labels splatted at ``p + n``.
+        backward: ``(H, W)`` diffusion of the labels splatted at ``p - n``.
+        residual: ``(2,)`` relative residuals of the two solves.
+    """
+
+    offset: Float[Array, "N 2"]
+    step_response: Float[Array, " N"]
+    normal: Float[Array, "N 2"]
+    depth_edge_confidence: Float[Array, "H W"]
+    forward: Float[Array, "H W"]
+    backward: Float[Array, "H W"]
+    residual: Float[Array, " 2"]
+
+
+def _gaussian_blur(img: Array, sigma: Array, radius: int) -> Array:
+    t = jnp.arange(-radius, radius + 1, dtype=img.dtype)
+    k = jnp.exp(-0.5 * (t / jnp.maximum(sigma, 1e-3)) ** 2)
+    k = k / k.sum()
+    pad = jnp.pad(img, ((radius, radius), (radius, radius), (0, 0)), mode="edge")
+    h = sum(k[i] * pad[:, i : i + img.shape[1]] for i in range(2 * radius + 1))
+    return sum(k[i] * h[i : i + img.shape[0]] for i in range(2 * radius + 1))
+
+
+def gradient_directions(
+    image: Float[Array, "H W C"], sigma: Array, radius: int = 8
+) -> Float[Array, "H W 2"]:
+    """Unit direction of the strongest colour change per pixel (structure-tensor eigenvector).
+
+    Args:
+        image: ``(H, W, C)`` float image (e.g. CIELAB/100).
+        sigma: Gaussian pre-blur in pixels.
+        radius: support radius of the blur in pixels.
+
+    Returns:
+        ``(H, W, 2)`` unit ``(nx, ny)``; the sign is arbitrary (both sides are tested).
+    """
+    b = _gaussian_blur(image, sigma, radius)
+    gx = jnp.zeros_like(b).at[:, 1:-1].set(0.5 * (b[:, 2:] - b[:, :-2]))
+    gy = jnp.zeros_like(b).at[1:-1].set(0.5 * (b[2:] - b[:-2]))
+    jxx, jyy, jxy = (gx * gx).sum(-1), (gy * gy).sum(-1), (gx * gy).sum(-1)
+    theta = 0.5 * jnp.arctan2(2.0 * jxy, jxx - jyy)
+    return jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
+
+
+def splat_labels(
+    x: Float[Array, " N"],
+    y: Float[Array, " N"],
+    values: Float[Array, " N"],
+    weights: Float[Array, " N"],
+    shape: tuple[int, int],
+) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
+    """Bilinear splat of weighted labels at sub-pixel positions.
+
+    Args:
+        x, y: ``(N,)`` positions in pixels (column, row); points outside the image are dropped.
+        values: ``(N,)`` labels.
+        weights: ``(N,)`` non-negative weights (0 for invalid points).
+        shape: ``(H, W)``.
+
+    Returns:
+        ``(label, weight)``: ``(H, W)`` weighted mean label (0 where nothing landed) and the
+        ``(H, W)`` total splat weight.
+    """
+    H, W = shape
+    x0, y0 = jnp.floor(x), jnp.floor(y)
+    fx, fy = x - x0, y - y0
+    acc_w = jnp.zeros((H, W), values.dtype)
+    acc_v = jnp.zeros((H, W), values.dtype)
+    for dy, dx, w in (
+        (0, 0, (1 - fx) * (1 - fy)),
+        (0, 1, fx * (1 - fy)),
+        (1, 0, (1 - fx) * fy),
+        (1, 1, fx * fy),
+    ):
+        xi = (x0 + dx).astype(jnp.int32)
+        yi = (y0 + dy).astype(jnp.int32)
+        inside = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+        ww = jnp.where(inside, w * weights, 0.0)
+        xi, yi = jnp.clip(xi, 0, W - 1), jnp.clip(yi, 0, H - 1)
+        acc_w = acc_w.at[yi, xi].add(ww)
+        acc_v = acc_v.at[yi, xi].add(ww * values)
+    label = acc_v / jnp.where(acc_w > 0, acc_w, 1.0)
+    return label, acc_w
+
+
+def _sample(img: Array, x: Array, y: Array) -> Array:
+    return map_coordinates(img, [y, x], order=1, mode="nearest")
+
+
+def step_responses(
+    disparity: Float[Array, "H W"], x: Array, y: Array, normal: Float[Array, "N 2"]
+) -> Float[Array, " N"]:
+    """Signed step-filter response of a disparity map across points along ``normal``.
+
+    ``Σ_k F_k D(p + t_k n)`` with the authors' taps ``F = [-1, -1.5, -2, 2, 1.5, 1]`` at
+    ``t = -3..-1, 1..3`` pixels, normalised so that a unit step gives 1.
+
+    Returns:
+        ``(N,)`` float: positive when the disparity increases along ``+n``.
+    """
+    t = jnp.asarray(_PROFILE_T, disparity.dtype)
+    f = jnp.asarray(_PROFILE_F, disparity.dtype) / 4.5
+    px = x[:, None] + t[None] * normal[:, 0:1]
+    py = y[:, None] + t[None] * normal[:, 1:2]
+    prof = _sample(disparity, px.ravel(), py.ravel()).reshape(px.shape)
+    return prof @ f
+
+
+def _grad_magnitude(d: Array) -> Array:
+    gx = jnp.zeros_like(d).at[:, 1:-1].set(0.5 * (d[:, 2:] - d[:, :-2]))
+    gy = jnp.zeros_like(d).at[1:-1].set(0.5 * (d[2:] - d[:-2]))
+    return jnp.sqrt(gx * gx + gy * gy + 1e-12)
+
+
+def surface_vectors(
+    edges: EdgeSet,
+    centre_view: Float[Array, "H W 3"],
+    config: SurfaceConfig = SurfaceConfig(),
+) -> SurfaceResult:
+    """Surface vectors, edge-importance weights and depth-edge confidence of an edge set.
+
+    Bidirectional diffusion: every valid point's disparity label is splatted (bilinearly, at
+    sub-pixel positions) at ``p + n`` in one image and at ``p - n`` in another, ``n`` the unit
+    image-gradient direction at ``p``; both are diffused by the weighted Poisson problem
+    (data weight ``data_weight`` on labels, smoothness ``c / (|∇I| + ε)`` from the centre view
+    in CIELAB). A label placed on the surface it belongs to leaves a sharp depth step at the
+    image edge; placed on the wrong side it spreads across the edge and the step fades. So per
+    point the step-filter response across ``p`` is compared between the two solutions and the
+    side of the stronger response is the surface vector. ``λ_e`` (eq 6.3) is the stronger
+    response; the depth-edge confidence is ``1 - exp(-g / confidence_scale)`` with ``g`` the
+    mean disparity-gradient magnitude of the two solutions (Fig. 4.7).
+
+    Jittable; differentiable in the labels, positions and the continuous config values
+    (the side choice itself is a discrete decision).
+
+    Args:
+        edges: the edge set (``N`` points; invalid ones are ignored).
+        centre_view: ``(H, W, 3)`` float32 RGB in [0, 1].
+        config: parameters.
+
+    Returns:
+        A `SurfaceResult`.
+
+    Raises:
+        ValueError: if ``centre_view`` is not ``(H, W, 3)``.
+
+    References:
+        Thesis Sec. 4.2.2 (eqs 4.8–4.11), Sec. 4.3 (Fig. 4.7), eq 6.3.
+    """
+    if centre_view.ndim != 3 or centre_view.shape[-1] != 3:
+        raise ValueError(f"centre_view must have shape (H, W, 3); got {centre_view.shape}")
+    H, W = centre_view.shape[:2]
+    lab = rgb_to_lab(centre_view) / 100.0
+    nmap = gradient_directions(lab, config.gradient_sigma, config.blur_radius)
+    valid = edges.valid
+    normal = jnp.stack(
+        [_sample(nmap[..., 0], edges.x, edges.y), _sample(nmap[..., 1], edges.x, edges.y)], -1
+    )
+    normal = normal / jnp.maximum(jnp.linalg.norm(normal, axis=-1, keepdims=True), 1e-6)
+    wts = valid.astype(centre_view.dtype)
+    d = jnp.where(valid, edges.disparity, 0.0)
+    off = config.offset * normal
+    sf, wf = splat_labels(edges.x + off[:, 0], edges.y + off[:, 1], d, wts, (H, W))
+    sb, wb = splat_labels(edges.x - off[:, 0], edges.y - off[:, 1], d, wts, (H, W))
+    wx, wy = guide_edge_weights(lab, scale=config.smooth_scale, eps=config.smooth_eps)
+    lam = config.data_weight * jnp.minimum(jnp.stack([wf, wb]), 1.0)
+    sol = jax.vmap(lambda a, b: solve_poisson(a, b, wx, wy, config=config.solver), in_axes=(0, 0))(
+        lam, jnp.stack([sf, sb])
+    )
+    forward, backward = sol.x[0], sol.x[1]
+    rf = jnp.abs(step_responses(forward, edges.x, edges.y, normal))
+    rb = jnp.abs(step_responses(backward, edges.x, edges.y, normal))
+    side = jnp.where(rf >= rb, 1.0, -1.0)
+    offset = jnp.where(valid[:, None], side[:, None] * normal, 0.0)
+    lam_e = jnp.where(valid, jnp.maximum(rf, rb), 0.0)
+    g = 0.5 * (_grad_magnitude(forward) + _grad_magnitude(backward))
+    conf = 1.0 - jnp.exp(-g / config.confidence_scale)
+    return SurfaceResult(
+        offset=offset,
+        step_response=lam_e,
+        normal=jnp.where(valid[:, None], normal, 0.0),
+        depth_edge_confidence=conf,
+        forward=forward,
+        backward=backward,
+        residual=sol.residual,
+    )
