@@ -30,8 +30,8 @@ class SurfaceConfig(eqx.Module):
         smooth_scale: numerator ``c`` of the smoothness ``c / (|∇I| + ε)``.
         smooth_eps: ``ε`` of the smoothness, in CIELAB/100 units.
         gradient_sigma: Gaussian pre-blur (pixels) of the centre view for the gradient
-            direction ``n`` (measured on backgammon/antinous with detected edges: 88%/90% correct sides,
-            against 81%/90% at 1.0).
+            direction ``n`` (with detected edges on backgammon/antinous: 88%/90% correct
+            sides at 2.5, against 81%/90% at 1.0).
         offset: distance (pixels) of the forward/backward splat from the point (thesis: 1).
         confidence_scale: disparity gradient (pixels per view step per pixel) at which the
             depth-edge confidence reaches ``1 - 1/e``.
