@@ -10,6 +10,9 @@ from ._surface import (
     gradient_directions as gradient_directions,
 )
 from ._surface import (
+    side_score as side_score,
+)
+from ._surface import (
     splat_labels as splat_labels,
 )
 from ._surface import (

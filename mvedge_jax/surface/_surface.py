@@ -25,8 +25,10 @@ class SurfaceConfig(eqx.Module):
 
     Attributes:
         data_weight: weight of a splatted label in the diffusion (thesis: 1e6, i.e. a hard
-            constraint; 1e3 is already ~20× the largest smoothness weight and keeps the
-            float32 system well conditioned).
+            constraint). Both converge with `solve_poisson` (residuals measured on the
+            Jacobi-preconditioned system); with detected (noisy) labels 1e3 was measured
+            slightly better (antinous 85.8% vs 84.5% correct sides, backgammon 93.2% both,
+            synthetic scenes 98.5–99.1% both), hence the default.
         smooth_scale: numerator ``c`` of the smoothness ``c / (|∇I| + ε)``.
         smooth_eps: ``ε`` of the smoothness, in CIELAB/100 units.
         gradient_sigma: Gaussian pre-blur (pixels) of the centre view for the gradient
@@ -160,6 +162,16 @@ def _sample(img: Array, x: Array, y: Array) -> Array:
     return map_coordinates(img, [y, x], order=1, mode="nearest")
 
 
+def _profiles(
+    disparity: Float[Array, "H W"], x: Array, y: Array, normal: Float[Array, "N 2"]
+) -> Float[Array, "N 6"]:
+    """Bilinear samples ``D(p + t n)`` at the tap offsets ``t = -3..-1, 1..3``."""
+    t = jnp.asarray(_PROFILE_T, disparity.dtype)
+    px = x[:, None] + t[None] * normal[:, 0:1]
+    py = y[:, None] + t[None] * normal[:, 1:2]
+    return _sample(disparity, px.ravel(), py.ravel()).reshape(px.shape)
+
+
 def step_responses(
     disparity: Float[Array, "H W"], x: Array, y: Array, normal: Float[Array, "N 2"]
 ) -> Float[Array, " N"]:
@@ -171,12 +183,28 @@ def step_responses(
     Returns:
         ``(N,)`` float: positive when the disparity increases along ``+n``.
     """
-    t = jnp.asarray(_PROFILE_T, disparity.dtype)
     f = jnp.asarray(_PROFILE_F, disparity.dtype) / 4.5
-    px = x[:, None] + t[None] * normal[:, 0:1]
-    py = y[:, None] + t[None] * normal[:, 1:2]
-    prof = _sample(disparity, px.ravel(), py.ravel()).reshape(px.shape)
-    return prof @ f
+    return _profiles(disparity, x, y, normal) @ f
+
+
+def side_score(profile: Float[Array, "N 6"], label: Float[Array, " N"]) -> Float[Array, " N"]:
+    """How well a profile is "a step away from the label, flat at the label on the + side".
+
+    The profile is oriented so that its label side is ``t > 0`` (the side the label was
+    splatted on). Score = ``|Σ_{t<0} |F_t| (D_t − d)|`` (the step to the far surface)
+    − ``Σ_{t>0} F_t |D_t − d|`` (how far the label's own side strays from the label), both
+    with the step-filter taps and divided by 4.5. For the correct side the label's surface is
+    flat at ``d`` and the step is sharp (score ≈ step height); for the wrong side the label is
+    pushed across the image edge and smeared into the other surface, so its own side strays
+    from ``d`` (score ≤ 0). Comparing only ``|step response|`` (the thesis' wording) was
+    measured 87.1% / 85.9% correct on backgammon / antinous with detected edges; this
+    label-consistent score gives 93.2% / 85.8%.
+    """
+    f = jnp.asarray(_PROFILE_F, profile.dtype) / 4.5
+    dev = profile - label[:, None]
+    far = jnp.abs(dev[:, :3] @ f[:3])
+    own = jnp.abs(dev[:, 3:]) @ f[3:]
+    return far - own
 
 
 def _grad_magnitude(d: Array) -> Array:
@@ -198,8 +226,10 @@ def surface_vectors(
     (data weight ``data_weight`` on labels, smoothness ``c / (|∇I| + ε)`` from the centre view
     in CIELAB). A label placed on the surface it belongs to leaves a sharp depth step at the
     image edge; placed on the wrong side it spreads across the edge and the step fades. So per
-    point the step-filter response across ``p`` is compared between the two solutions and the
-    side of the stronger response is the surface vector. ``λ_e`` (eq 6.3) is the stronger
+    point the depth profile across ``p`` along ``n`` is compared between the two solutions
+    with the step filter, and the side whose profile is the sharper step *consistent with the
+    label* (flat at the label on the side it was splatted, stepping away on the other; see
+    `side_score`) is the surface vector. ``λ_e`` (eq 6.3) is the stronger
     response; the depth-edge confidence is ``1 - exp(-g / confidence_scale)`` with ``g`` the
     mean disparity-gradient magnitude of the two solutions (Fig. 4.7).
 
@@ -241,9 +271,14 @@ def surface_vectors(
         lam, jnp.stack([sf, sb])
     )
     forward, backward = sol.x[0], sol.x[1]
-    rf = jnp.abs(step_responses(forward, edges.x, edges.y, normal))
-    rb = jnp.abs(step_responses(backward, edges.x, edges.y, normal))
-    side = jnp.where(rf >= rb, 1.0, -1.0)
+    f = jnp.asarray(_PROFILE_F, forward.dtype) / 4.5
+    pf = _profiles(forward, edges.x, edges.y, normal)
+    pb = _profiles(backward, edges.x, edges.y, normal)
+    rf, rb = jnp.abs(pf @ f), jnp.abs(pb @ f)
+    # Backward profile reversed so that its label side (p - n) is at t > 0 as well.
+    score_f = side_score(pf, d)
+    score_b = side_score(pb[:, ::-1], d)
+    side = jnp.where(score_f >= score_b, 1.0, -1.0)
     offset = jnp.where(valid[:, None], side[:, None] * normal, 0.0)
     lam_e = jnp.where(valid, jnp.maximum(rf, rb), 0.0)
     g = 0.5 * (_grad_magnitude(forward) + _grad_magnitude(backward))

@@ -167,3 +167,24 @@ def test_gradient_of_lambda_e_wrt_labels(x64):
 
     d0 = jnp.linspace(0.5, 1.0, 8)
     check_grads(f, (d0,), order=1, modes=("rev",), eps=1e-6, atol=1e-4, rtol=1e-3)
+
+
+def test_side_score_prefers_label_consistent_step():
+    # Oriented profiles at t = -3..-1, 1..3 (label side t > 0), label d = 1.
+    good = jnp.array([[0.0, 0.0, 0.0, 1.0, 1.0, 1.0]])  # flat at the label, step to 0
+    smeared = jnp.array([[1.0, 1.0, 1.0, 0.9, 0.6, 0.3]])  # label pushed across the edge
+    label = jnp.array([1.0])
+    from mvedge_jax.surface import side_score
+
+    assert float(side_score(good, label)[0]) == pytest.approx(1.0, abs=1e-6)
+    assert float(side_score(smeared, label)[0]) < 0.0
+
+
+def test_thesis_data_weight_converges(scene):
+    centre, gt = scene
+    es = gt_edge_set(centre, gt)
+    res = surface_vectors(es, jnp.asarray(centre), SurfaceConfig(data_weight=1e6))
+    assert float(res.residual.max()) <= 1e-5
+    truth, depth = true_sides(es, np.asarray(res.normal), gt)
+    chosen = np.sign(np.sum(np.asarray(res.offset) * np.asarray(res.normal), axis=1))
+    assert np.mean(chosen[depth] == truth[depth]) >= 0.9
