@@ -1,0 +1,130 @@
+"""Stages that look across EPIs in the centre view: outlier rejection (eqs 4.1–4.2) and the
+trilateral filter of the sparse disparities (eq 4.6)."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jax import lax
+from jaxtyping import Array, Bool, Float, Int
+
+from ._config import EdgeConfig
+from ._edgeset import EdgeSet
+
+
+def _box_sum(img: Float[Array, "... H W"], ry: int, rx: int) -> Float[Array, "... H W"]:
+    """Sum over the (2ry+1) x (2rx+1) window around each pixel (zero outside), via cumsums."""
+    H, W = img.shape[-2:]
+
+    def along(a, r, axis):
+        n = a.shape[axis]
+        c = jnp.cumsum(a, axis=axis)
+        pad = [(0, 0)] * a.ndim
+        pad[axis] = (1, 0)
+        c = jnp.pad(c, pad)  # c[i] = sum a[:i]
+        hi = jnp.clip(jnp.arange(n) + r + 1, 0, n)
+        lo = jnp.clip(jnp.arange(n) - r, 0, n)
+        return jnp.take(c, hi, axis=axis) - jnp.take(c, lo, axis=axis)
+
+    return along(along(img, ry, img.ndim - 2), rx, img.ndim - 1)
+
+
+def reject_outliers(
+    edges: EdgeSet, labels: Int[Array, " N"], shape: tuple[int, int], config: EdgeConfig
+) -> Bool[Array, " N"]:
+    """Keep-mask of the neighbour-count outlier test (eqs 4.1–4.2), per EPI direction.
+
+    ``A(l_i)`` = lines of the same direction within a ``p x q`` window (``p, q`` =
+    ``outlier_window_frac`` of the width / height) whose filter label is within
+    ``outlier_label_tol`` of ``l_i``'s; ``l_i`` is discarded when ``c_i |A(l_i)| / (p q) < τ``.
+
+    Args:
+        edges: the edge set (centre-view positions).
+        labels: ``(N,)`` int filter label of each point.
+        shape: ``(H, W)`` of the centre view.
+        config: `EdgeConfig` (``outlier_window_frac``, ``outlier_label_tol``, ``outlier_tau``).
+
+    Returns:
+        ``(N,)`` bool, True = keep (invalid points are returned False).
+
+    References:
+        Thesis Sec. 4.1.3, eqs 4.1–4.2.
+    """
+    H, W = shape
+    n = config.n_filters
+    p = max(1, round(W * config.outlier_window_frac))
+    q = max(1, round(H * config.outlier_window_frac))
+    xi = jnp.clip(jnp.round(edges.x).astype(jnp.int32), 0, W - 1)
+    yi = jnp.clip(jnp.round(edges.y).astype(jnp.int32), 0, H - 1)
+    lab = jnp.clip(labels, 0, n - 1)
+    keep = jnp.zeros_like(edges.valid)
+    for direction in (0, 1):
+        sel = edges.valid & (edges.direction == direction)
+        grid = jnp.zeros((n, H, W), jnp.float32).at[lab, yi, xi].add(sel.astype(jnp.float32))
+        counts = _box_sum(grid, q // 2, p // 2)  # (n, H, W)
+        tol = config.outlier_label_tol
+        if tol:
+            cs = jnp.pad(jnp.cumsum(counts, axis=0), ((1, 0), (0, 0), (0, 0)))
+            hi = jnp.clip(jnp.arange(n) + tol + 1, 0, n)
+            lo = jnp.clip(jnp.arange(n) - tol, 0, n)
+            counts = cs[hi] - cs[lo]
+        a = counts[lab, yi, xi]
+        ok = edges.confidence * a / (p * q) >= config.outlier_tau
+        keep = keep | (sel & ok)
+    return keep
+
+
+def trilateral_filter(
+    edges: EdgeSet, shape: tuple[int, int], config: EdgeConfig
+) -> Float[Array, " N"]:
+    """Joint spatial / disparity / colour filter of the sparse disparities (eq 4.6).
+
+    ``f(p_d) = Σ_q N_σs(|p_s - q_s|) N_σd(p_d - q_d) N_σc(|p_c - q_c|) q_d / W`` over the valid
+    visible points ``q`` (both directions) in a ``(2r+1)^2`` window, ``r = trilateral_radius``.
+    Points are rasterised to the centre-view pixel grid (one per pixel and EPI direction) and
+    the filter runs densely on the grids: a ``lax.fori_loop`` over the window offsets, each step
+    a few element-wise operations on ``(2, 2, H, W)`` arrays. Colour distances use LAB / 100.
+
+    Returns:
+        ``(N,)`` filtered disparities (unchanged for invalid points).
+
+    References:
+        Thesis Sec. 4.1.5, eq 4.6.
+    """
+    H, W = shape
+    r = config.trilateral_radius
+    xi = jnp.clip(jnp.round(edges.x).astype(jnp.int32), 0, W - 1)
+    yi = jnp.clip(jnp.round(edges.y).astype(jnp.int32), 0, H - 1)
+    use = edges.valid & edges.visible
+    lab = edges.lab * 0.01
+    # Rasterise: channels (mask, d, L, a, b), one grid per direction.
+    vals = jnp.concatenate(
+        [jnp.ones_like(edges.disparity)[:, None], edges.disparity[:, None], lab], 1
+    )
+    ch = edges.direction.astype(jnp.int32)
+    ys = jnp.where(use, yi, H + 1)  # out of bounds: not rasterised
+    grid = jnp.zeros((2, H, W, 5), jnp.float32).at[ch, ys, xi].set(vals, mode="drop")
+    p = jnp.moveaxis(grid, -1, 0)  # (5, 2, H, W)
+    q = jnp.pad(p, ((0, 0), (0, 0), (r, r), (r, r)))
+    a_s = 0.5 / config.sigma_s**2
+    a_d = 0.5 / config.sigma_d**2
+    a_c = 0.5 / config.sigma_c**2
+    side = 2 * r + 1
+
+    def body(k, carry):
+        num, den = carry
+        dy, dx = k // side, k % side
+        qk = lax.dynamic_slice(q, (0, 0, dy, dx), (5, 2, H, W))
+        e = (
+            a_s * ((dy - r) ** 2 + (dx - r) ** 2).astype(jnp.float32)
+            + a_d * (p[1][:, None] - qk[1][None]) ** 2
+            + a_c * jnp.sum((p[2:][:, :, None] - qk[2:][:, None]) ** 2, axis=0)
+        )  # (2 p-directions, 2 q-directions, H, W)
+        w = qk[0][None] * jnp.exp(-e)
+        return num + jnp.sum(w * qk[1][None], axis=1), den + jnp.sum(w, axis=1)
+
+    zero = jnp.zeros((2, H, W), jnp.float32)
+    num, den = lax.fori_loop(0, side * side, body, (zero, zero))
+    filt = num / jnp.maximum(den, 1e-20)
+    fd = filt[ch, yi, xi]
+    ok = use & (den[ch, yi, xi] > 0) & (grid[ch, yi, xi, 0] > 0)
+    return jnp.where(ok, fd, edges.disparity)

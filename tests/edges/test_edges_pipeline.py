@@ -1,0 +1,137 @@
+"""`detect_edges` end to end on synthetic light fields: accuracy, overflow, bad input, jit."""
+
+from __future__ import annotations
+
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mvedge_jax.edges import (
+    HORIZONTAL,
+    VERTICAL,
+    EdgeConfig,
+    EdgeSet,
+    detect_edges,
+    point_errors,
+    render_sparse_disparity,
+)
+from mvedge_jax.lightfield import LightField
+
+
+@pytest.fixture(scope="module")
+def plane():
+    from conftest import plane_light_field
+
+    return plane_light_field(0.637, H=40, W=56)
+
+
+@pytest.fixture(scope="module")
+def plane_edges(plane):
+    return detect_edges(plane)
+
+
+def test_plane_disparity_recovered(plane, plane_edges):
+    e = plane_edges
+    assert isinstance(e, EdgeSet)
+    assert e.capacity == 40 * 56 + 56 * 40
+    v = np.asarray(e.valid)
+    dirs = np.asarray(e.direction)
+    # Points from both EPI directions; the plane's disparity to a few thousandths.
+    assert (v & (dirs == HORIZONTAL)).sum() > 100 and (v & (dirs == VERTICAL)).sum() > 100
+    d = np.asarray(e.disparity)[v]
+    assert np.median(np.abs(d - 0.637)) < 3e-3
+    assert np.mean(np.abs(d - 0.637) < 0.02) > 0.95
+    err = np.asarray(point_errors(e, plane.centre_gt))
+    assert np.nanmax(err) == pytest.approx(np.abs(d - 0.637).max())
+    assert int(e.n_dropped) == 0
+    # Geometry of the outputs.
+    x, y = np.asarray(e.x)[v], np.asarray(e.y)[v]
+    assert x.min() >= 0 and x.max() <= 55 and y.min() >= 0 and y.max() <= 39
+    it = np.asarray(e.intercepts)[v]
+    np.testing.assert_allclose(it[:, 0] - it[:, 1], 8 * d, atol=1e-4)  # 9 views: xt - xb = 8 d
+    lab = np.asarray(e.lab)[v]
+    assert lab[:, 0].min() >= 0 and lab[:, 0].max() <= 100
+
+
+def test_overflow_counted_and_warned(plane):
+    cfg = EdgeConfig(line_capacity=4, min_ratio=0.0)
+    with pytest.warns(UserWarning, match="did not fit"):
+        e = detect_edges(plane, cfg)
+    assert e.capacity == 4 * (40 + 56)
+    assert int(e.n_dropped) > 0
+    # Every EPI of the textured plane has more than 4 candidates: it keeps 4 and the rest are
+    # counted, so kept + dropped = all candidates = the valid points without a capacity, up to
+    # the two border pixels per EPI whose sub-pixel position falls off the image.
+    full = detect_edges(plane, EdgeConfig(min_ratio=0.0))
+    n_cand = int(np.asarray(full.valid).sum())
+    assert int(np.asarray(e.valid).sum()) == 4 * (40 + 56)
+    assert 0 <= int(e.n_dropped) - (n_cand - 4 * (40 + 56)) <= 2 * (40 + 56)
+
+
+def test_bad_inputs(plane):
+    with pytest.raises(ValueError, match="cannot cover|covers"):
+        detect_edges(plane, EdgeConfig(d_max=0.3))  # scene range up to 1.137
+    bad = eqx.tree_at(lambda lf: lf.views, plane, plane.views.at[4, 4, 3, 3, 0].set(jnp.nan))
+    with pytest.raises(ValueError, match="NaN"):
+        detect_edges(bad)
+    with pytest.raises(ValueError, match="at least 3"):
+        LightField(views=plane.views[:2], view_mask=jnp.ones((2, 9), bool))
+    with pytest.raises(ValueError, match="too much"):
+        detect_edges(plane, EdgeConfig(d_max=6.0))
+    with pytest.raises(ValueError):
+        EdgeConfig(subpixel="cubic")
+    with pytest.raises(ValueError):
+        EdgeConfig(n_filters=2)
+    with pytest.raises(ValueError):
+        EdgeConfig(line_capacity=0)
+    with pytest.raises(ValueError):
+        EdgeConfig(presmooth_sigma=-1.0)
+
+
+def test_jit_end_to_end(plane, plane_edges):
+    f = jax.jit(
+        lambda views: detect_edges(
+            LightField(
+                views=views, view_mask=plane.view_mask, disparity_range=plane.disparity_range
+            )
+        )
+    )
+    a = f(plane.views)
+    b = plane_edges
+    assert a.capacity == b.capacity == 2 * 40 * 56
+    np.testing.assert_array_equal(np.asarray(a.valid), np.asarray(b.valid))
+    np.testing.assert_allclose(np.asarray(a.disparity), np.asarray(b.disparity), atol=1e-5)
+    d, m = jax.jit(lambda e: render_sparse_disparity(e, (40, 56)))(a)
+    assert d.shape == (40, 56) and m.dtype == jnp.bool_ and int(m.sum()) > 100
+    np.testing.assert_allclose(np.asarray(d)[np.asarray(m)], 0.637, atol=0.02)
+
+
+def test_steps_are_configurable():
+    # Every optional stage runs together and keeps a plane accurate.
+    from conftest import plane_light_field
+
+    plane = plane_light_field(0.637, H=24, W=40, seed=3)
+    cfg = EdgeConfig(
+        nms=True,
+        lambda_frac=0.2,
+        outliers=True,
+        outlier_tau=0.0,
+        gradient_alignment=True,
+        entropy_search=True,
+        trilateral=True,
+        trilateral_radius=3,
+        multiscale=True,
+    )
+    e = detect_edges(plane, cfg, key=jax.random.key(1))
+    # fine: one slot per centre-row pixel; coarse: one per coarse pixel, repeated on 2 EPIs
+    assert e.capacity == (24 * 40 + 24 * 20) + (40 * 24 + 40 * 12)
+    v = np.asarray(e.valid)
+    assert v.sum() > 50
+    assert np.median(np.abs(np.asarray(e.disparity)[v] - 0.637)) < 0.02
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        detect_edges(plane, EdgeConfig(subpixel="none"))
