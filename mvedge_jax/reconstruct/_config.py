@@ -1,0 +1,176 @@
+"""`ReconstructConfig`: every option of the smooth 4D reconstruction (thesis Ch. 6)."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from ..solve import SolverConfig
+from ._wmf import WEIGHT_TYPES
+
+COLOUR_SPACES = ("lab", "rgb")
+HOLE_FILLS = ("solve", "background")
+
+
+def _f32(x) -> Array:
+    """Float array leaf (float32, or float64 when x64 is enabled)."""
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+def _concrete(x) -> np.ndarray | None:
+    try:
+        return np.asarray(x)
+    except Exception:  # a tracer (config built under jit/vmap): nothing to check
+        return None
+
+
+class ReconstructConfig(eqx.Module):
+    """Configuration of the smooth 4D reconstruction (centre diffusion, sharpening,
+    cross-hair projection, angular inpainting, off-cross-hair views).
+
+    Array fields are pytree leaves (sweep / `vmap` / differentiate without recompiling);
+    the others are static.
+
+    Attributes:
+        omega: ``ω`` of the centre data weight ``ω · exp(a · λ_e)`` (eq 6.3; thesis 150).
+        a: exponent ``a`` of eq 6.3 (thesis 3).
+        lambda_e_max: ``λ_e`` is clipped to ``[0, lambda_e_max]`` before the exponential.
+        offset_scale: labels are splatted at ``p + offset_scale · n`` (``n`` the surface
+            vector, pixels).
+        centre_c: numerator of the centre smoothness ``c / (|∇I| + ε)``.
+        centre_eps: ``ε`` of the centre smoothness, in guide units (see ``colour_space``).
+        conf_beta: depth-edge confidence attenuation: smoothness across an edge is divided by
+            ``1 + conf_beta · conf`` (``conf`` the larger confidence of the two pixels).
+        wmf_sigma: range parameter of the weighted median filter (guide units, RGB [0, 1]).
+        epi_data_weight: data weight on reprojected pixels (eq 6.8; thesis 15).
+        epi_centre_weight: data weight of the centre view's row of every EPI (the estimated
+            map itself; large = the centre view keeps its estimate).
+        epi_hole_weight: weight of the background prior in reprojection holes.
+        epi_line_scale: multiplier of ``λ_e`` on EPI-line pixels (eq 6.8; thesis 1).
+        epi_line_floor: minimum line weight (so that lines with ``λ_e ≈ 0`` still guide).
+        epi_occlusion_tol: an EPI-line pixel is dropped where the reprojected disparity is
+            larger (nearer) than the line's by more than this (the line is occluded there).
+        epi_c: numerator ``c`` of the EPI smoothness (eq 6.7; thesis 0.1).
+        epi_eps: ``ε`` of eq 6.7, guide units.
+        refine_jump: photo-consistent boundary snapping (`photo_refine`) acts where the
+            disparity range of the window exceeds this (pixels per view step).
+        refine_margin: colour-cost advantage a candidate needs over the current value.
+        fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
+        fill_data_weight: data weight of the reprojected pixels in that solve.
+        upsample: solve the centre problem on an ``upsample×`` grid (1 or 2) and average
+            back (sub-pixel label placement).
+        colour_space: ``"lab"`` (CIELAB / 100) or ``"rgb"`` guide for the smoothness terms.
+        sharpen: apply the weighted median filter to the centre disparity (Sec. 6.1).
+        wmf_radius: weighted-median window radius (thesis 7).
+        wmf_weight: weighted-median weight type (see `weighted_median_filter`).
+        wmf_iterations: bisection steps of the weighted median.
+        refine: snap the centre disparity near depth discontinuities to the photo-consistent
+            side (occlusion-aware multi-view colour test, `photo_refine`) before the weighted
+            median.
+        refine_radius: window radius of that test (candidates: window min and max).
+        refine_iterations: passes of the centre-view refinement.
+        refine_views: refine every other view too (after inpainting / merging), with the
+            cross-hair views as the colour reference.
+        refine_view_iterations: passes of the per-view refinement.
+        hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
+            (nearest valid farther value along the row) for off-cross-hair views.
+        crack_parallax: forwarded to `forward_project`.
+        solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
+        epi_solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
+            Jacobi preconditioner is much faster than the batched multigrid).
+        fill_solver: `SolverConfig` of the hole-filling solves of off-cross-hair views.
+
+    Raises:
+        ValueError: on negative weights, non-positive ``ε``/``σ``, or unknown option names.
+
+    References:
+        Thesis Ch. 6, eqs 6.1–6.8; SPEC §4.
+    """
+
+    omega: Array = eqx.field(converter=_f32, default=150.0)
+    a: Array = eqx.field(converter=_f32, default=3.0)
+    lambda_e_max: Array = eqx.field(converter=_f32, default=2.0)
+    offset_scale: Array = eqx.field(converter=_f32, default=1.0)
+    centre_c: Array = eqx.field(converter=_f32, default=1.0)
+    centre_eps: Array = eqx.field(converter=_f32, default=1e-2)
+    conf_beta: Array = eqx.field(converter=_f32, default=10.0)
+    wmf_sigma: Array = eqx.field(converter=_f32, default=0.1)
+    epi_data_weight: Array = eqx.field(converter=_f32, default=15.0)
+    epi_centre_weight: Array = eqx.field(converter=_f32, default=1000.0)
+    epi_hole_weight: Array = eqx.field(converter=_f32, default=1.0)
+    epi_line_scale: Array = eqx.field(converter=_f32, default=1.0)
+    epi_line_floor: Array = eqx.field(converter=_f32, default=0.1)
+    epi_occlusion_tol: Array = eqx.field(converter=_f32, default=0.1)
+    epi_c: Array = eqx.field(converter=_f32, default=0.1)
+    epi_eps: Array = eqx.field(converter=_f32, default=1e-2)
+    refine_jump: Array = eqx.field(converter=_f32, default=0.2)
+    refine_margin: Array = eqx.field(converter=_f32, default=0.0)
+    fill_c: Array = eqx.field(converter=_f32, default=1.0)
+    fill_data_weight: Array = eqx.field(converter=_f32, default=1000.0)
+    upsample: int = eqx.field(static=True, default=1)
+    colour_space: str = eqx.field(static=True, default="lab")
+    sharpen: bool = eqx.field(static=True, default=True)
+    wmf_radius: int = eqx.field(static=True, default=7)
+    wmf_weight: str = eqx.field(static=True, default="exp")
+    wmf_iterations: int = eqx.field(static=True, default=10)
+    refine: bool = eqx.field(static=True, default=True)
+    refine_radius: int = eqx.field(static=True, default=3)
+    refine_iterations: int = eqx.field(static=True, default=8)
+    refine_views: bool = eqx.field(static=True, default=True)
+    refine_view_iterations: int = eqx.field(static=True, default=2)
+    hole_fill: str = eqx.field(static=True, default="solve")
+    crack_parallax: float = eqx.field(static=True, default=0.5)
+    solver: SolverConfig = SolverConfig()
+    epi_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
+    fill_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
+
+    def __check_init__(self):
+        nonneg = ("omega", "lambda_e_max", "centre_c", "conf_beta", "epi_data_weight",
+                  "epi_centre_weight", "epi_hole_weight",
+                  "epi_line_scale", "epi_line_floor", "epi_occlusion_tol", "epi_c", "fill_c", "fill_data_weight",
+                  "refine_jump", "refine_margin")
+        positive = ("centre_eps", "wmf_sigma", "epi_eps")
+        for name in nonneg + positive:
+            v = _concrete(getattr(self, name))
+            if v is None:
+                continue
+            if not np.all(np.isfinite(v)):
+                raise ValueError(f"ReconstructConfig.{name} must be finite; got {v}")
+            if name in positive and not np.all(v > 0):
+                raise ValueError(f"ReconstructConfig.{name} must be > 0; got {v}")
+            if name in nonneg and not np.all(v >= 0):
+                raise ValueError(f"ReconstructConfig.{name} must be >= 0; got {v}")
+        if self.upsample not in (1, 2):
+            raise ValueError(f"ReconstructConfig.upsample must be 1 or 2; got {self.upsample}")
+        if self.colour_space not in COLOUR_SPACES:
+            raise ValueError(
+                f"ReconstructConfig.colour_space must be one of {COLOUR_SPACES}; "
+                f"got {self.colour_space!r}"
+            )
+        if self.wmf_weight not in WEIGHT_TYPES:
+            raise ValueError(
+                f"ReconstructConfig.wmf_weight must be one of {WEIGHT_TYPES}; got {self.wmf_weight!r}"
+            )
+        if int(self.refine_radius) < 1 or int(self.refine_iterations) < 0 or int(
+            self.refine_view_iterations
+        ) < 0:
+            raise ValueError(
+                f"ReconstructConfig.refine_radius must be >= 1 and the refine iterations >= 0; "
+                f"got {self.refine_radius}, {self.refine_iterations}, "
+                f"{self.refine_view_iterations}"
+            )
+        if int(self.wmf_radius) < 1 or int(self.wmf_iterations) < 1:
+            raise ValueError(
+                f"ReconstructConfig.wmf_radius and wmf_iterations must be >= 1; got "
+                f"{self.wmf_radius}, {self.wmf_iterations}"
+            )
+        if self.hole_fill not in HOLE_FILLS:
+            raise ValueError(
+                f"ReconstructConfig.hole_fill must be one of {HOLE_FILLS}; got {self.hole_fill!r}"
+            )
+        if not self.crack_parallax >= 0:
+            raise ValueError(
+                f"ReconstructConfig.crack_parallax must be >= 0; got {self.crack_parallax}"
+            )

@@ -1,0 +1,183 @@
+"""Cross-hair projection and angular (EPI) inpainting (thesis Sec. 6.1, eqs 6.4–6.8)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float
+
+from ..edges import EdgeSet
+from ..lightfield import forward_project
+from ..solve import guide_edge_weights, solve_poisson
+from ._config import ReconstructConfig
+
+
+def project_cross_hair(
+    centre: Float[Array, "H W"],
+    grid: tuple[int, int],
+    *,
+    crack_parallax: float = 0.5,
+) -> tuple[Float[Array, "V H W"], Bool[Array, "V H W"], Float[Array, "U H W"], Bool[Array, "U H W"]]:
+    """Forward-project the centre disparity into every view of the central cross-hair.
+
+    View ``(U // 2, col)`` receives ``forward_project(centre, (0, col - V // 2))`` and view
+    ``(row, V // 2)`` receives ``forward_project(centre, (row - U // 2, 0))``: z-buffered (the
+    larger disparity, nearer, wins), holes (disocclusions) marked invalid.
+
+    Args:
+        centre: ``(H, W)`` centre-view disparity (pixels per view step).
+        grid: ``(U, V)`` angular size of the light field (static).
+        crack_parallax: forwarded to `forward_project`.
+
+    Returns:
+        ``(proj_h (V, H, W), valid_h (V, H, W), proj_v (U, H, W), valid_v (U, H, W))``.
+
+    References:
+        Thesis Sec. 6.1, "Cross-hair View Projection".
+    """
+    U, V = grid
+    dc = jnp.arange(V, dtype=jnp.float32) - V // 2
+    dr = jnp.arange(U, dtype=jnp.float32) - U // 2
+    zv = jnp.zeros((V,), jnp.float32)
+    zu = jnp.zeros((U,), jnp.float32)
+
+    def proj(off):
+        return forward_project(centre, off, crack_parallax=crack_parallax)
+
+    ph, vh = jax.vmap(proj)(jnp.stack([zv, dc], axis=1))
+    pv, vv = jax.vmap(proj)(jnp.stack([dr, zu], axis=1))
+    return ph, vh, pv, vv
+
+
+def rasterise_lines(
+    slice_index: Float[Array, " N"],
+    position: Float[Array, " N"],
+    disparity: Float[Array, " N"],
+    weight: Float[Array, " N"],
+    shape: tuple[int, int, int],
+) -> tuple[Float[Array, "S A L"], Float[Array, "S A L"]]:
+    """Rasterise EPI lines into a stack of EPIs.
+
+    Point ``i`` lies in EPI ``round(slice_index_i)`` and traces ``l(a) = position_i −
+    (a − A // 2) · disparity_i`` through angular rows ``a = 0 … A−1``; each sample is split
+    linearly between the two nearest pixels along ``l``. Returns the accumulated weight and the
+    weighted-mean label per pixel (as `splat_bilinear`).
+
+    Args:
+        slice_index, position, disparity, weight: ``(N,)``; zero weight = unused.
+        shape: ``(S, A, L)`` of the EPI stack.
+
+    Returns:
+        ``(weight (S, A, L), label (S, A, L))``.
+    """
+    S, A, L = shape
+    a = jnp.arange(A, dtype=jnp.float32) - A // 2
+    s = jnp.round(slice_index).astype(jnp.int32)
+    pos = position[:, None] - a[None, :] * disparity[:, None]  # (N, A)
+    l0 = jnp.floor(pos)
+    f = pos - l0
+    l0 = l0.astype(jnp.int32)
+    ai = jnp.broadcast_to(jnp.arange(A, dtype=jnp.int32)[None, :], pos.shape)
+    si = jnp.broadcast_to(s[:, None], pos.shape)
+    w = jnp.broadcast_to(weight[:, None], pos.shape)
+    v = jnp.broadcast_to(disparity[:, None], pos.shape)
+    lam = jnp.zeros((S, A, L), jnp.float32)
+    num = jnp.zeros((S, A, L), jnp.float32)
+    for dl, b in ((0, 1.0 - f), (1, f)):
+        li = l0 + dl
+        ok = (li >= 0) & (li < L) & (si >= 0) & (si < S)
+        wb = jnp.where(ok, w * b, 0.0)
+        sidx = jnp.where(ok, si, S)
+        lam = lam.at[sidx, ai, li].add(wb, mode="drop")
+        num = num.at[sidx, ai, li].add(wb * v, mode="drop")
+    pos_ = lam > 0
+    return lam, jnp.where(pos_, num / jnp.where(pos_, lam, 1.0), 0.0)
+
+
+def _background_1d(values: Array, valid: Array) -> Array:
+    """Per hole pixel of a 1-D signal: the smaller (farther) of the nearest valid values to
+    its left and right (0 when there is none)."""
+    n = values.shape[0]
+    idx = jnp.arange(n)
+    left = jax.lax.cummax(jnp.where(valid, idx, -1))
+    right = jax.lax.cummin(jnp.where(valid, idx, n), reverse=True)
+    big = jnp.asarray(jnp.inf, values.dtype)
+    vl = jnp.where(left >= 0, values[jnp.clip(left, 0, n - 1)], big)
+    vr = jnp.where(right < n, values[jnp.clip(right, 0, n - 1)], big)
+    out = jnp.minimum(vl, vr)
+    return jnp.where(valid, values, jnp.where(jnp.isfinite(out), out, 0.0))
+
+
+def inpaint_epis(
+    projected: Float[Array, "S A L"],
+    valid: Bool[Array, "S A L"],
+    epi_guide: Float[Array, "S A L C"],
+    line_weight: Float[Array, "S A L"],
+    line_label: Float[Array, "S A L"],
+    config: ReconstructConfig,
+) -> Float[Array, "S A L"]:
+    """Solve eq 6.4 on every EPI of a stack (batched `solve_poisson`).
+
+    Data weight (eq 6.8): ``epi_data_weight`` on reprojected pixels (``valid``;
+    ``epi_centre_weight`` on the centre angular row, the view the map was estimated in), the line
+    weight on EPI-line pixels that are not occluded by a reprojected value nearer by more
+    than ``epi_occlusion_tol``, 0
+    elsewhere; the terms add where they overlap. Holes (disocclusions) additionally get
+    a weak prior (``epi_hole_weight``) towards the background: the farther of the nearest
+    reprojected values to either side along the spatial axis. Smoothness (eq 6.7): ``epi_c / (|∇I| +
+    epi_eps)`` along both EPI axes (angular and spatial).
+
+    Args:
+        projected: ``(S, A, L)`` reprojected disparities (any value where not ``valid``).
+        valid: ``(S, A, L)`` bool.
+        epi_guide: ``(S, A, L, C)`` EPI colours (guide units).
+        line_weight, line_label: ``(S, A, L)`` from `rasterise_lines`.
+        config: `ReconstructConfig`.
+
+    Returns:
+        ``(S, A, L)`` inpainted disparity.
+
+    References:
+        Thesis Sec. 6.1, "Angular Inpainting", eqs 6.4–6.8.
+    """
+    S, A, L = projected.shape
+    occluded = valid & (projected > line_label + config.epi_occlusion_tol)
+    lw = jnp.where(occluded, 0.0, line_weight)
+    # Reprojected pixels; the centre row (the view the map was estimated in) can be pinned.
+    row_w = jnp.where(jnp.arange(A) == A // 2, config.epi_centre_weight, config.epi_data_weight)
+    cw = jnp.where(valid, row_w[None, :, None], 0.0)
+    # Holes are disocclusions: prior = the farther of the nearest valid values along the
+    # spatial axis (the background), weight epi_hole_weight.
+    bg = jax.vmap(jax.vmap(_background_1d))(projected, valid)
+    hw = jnp.where(valid, 0.0, config.epi_hole_weight)
+    lam = cw + lw + hw
+    num = cw * jnp.where(valid, projected, 0.0) + lw * line_label + hw * bg
+    pos = lam > 0
+    target = jnp.where(pos, num / jnp.where(pos, lam, 1.0), 0.0)
+    # Initial guess: the reprojection where valid, else the background prior.
+    x0 = jnp.where(valid, projected, bg)
+    wx, wy = jax.vmap(
+        lambda g: guide_edge_weights(g, scale=config.epi_c, eps=config.epi_eps)
+    )(epi_guide)
+    # guide_edge_weights on an (A, L) grid: weight_x along L (A, L-1), weight_y along A (A-1, L).
+    return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi_solver).x
+
+
+def edge_lines(
+    edges: EdgeSet,
+    offset: Float[Array, "N 2"],
+    step_response: Float[Array, " N"],
+    config: ReconstructConfig,
+):
+    """Per-point line parameters shared by the horizontal and vertical EPI stacks.
+
+    Returns:
+        ``(qx, qy, weight)``: the offset centre-view position ``p + offset_scale · n`` and the
+        line weight ``max(epi_line_scale · λ_e, epi_line_floor)`` (0 for invalid points).
+    """
+    off = jnp.asarray(offset, jnp.float32)
+    qx = edges.x + config.offset_scale * off[:, 0]
+    qy = edges.y + config.offset_scale * off[:, 1]
+    lam_e = jnp.clip(jnp.asarray(step_response, jnp.float32), 0.0, config.lambda_e_max)
+    w = jnp.maximum(config.epi_line_scale * lam_e, config.epi_line_floor)
+    return qx, qy, jnp.where(edges.valid, w, 0.0)

@@ -1,0 +1,151 @@
+"""Centre-view diffusion (eq 6.1): accuracy, surface vectors, gradients, jit, errors."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from conftest import two_region_view
+from jax.test_util import check_grads
+
+from mvedge_jax.edges import HORIZONTAL, EdgeSet
+from mvedge_jax.reconstruct import OracleSurface, ReconstructConfig, centre_disparity
+from mvedge_jax.solve import SolverConfig
+
+
+def _step_edges(H: int, split: int, d_left: float, d_right: float, dtype=np.float32):
+    """Edge points on both boundary columns of a vertical step at ``split | split + 1``:
+    the left column carries the left label (surface vector -x), the right one the right label
+    (+x). Returns ``(EdgeSet, OracleSurface)`` without the confidence map."""
+    ys = np.arange(H, dtype=dtype)
+    x = np.concatenate([np.full(H, split), np.full(H, split + 1)]).astype(dtype)
+    y = np.concatenate([ys, ys])
+    d = np.concatenate([np.full(H, d_left), np.full(H, d_right)]).astype(dtype)
+    n = 2 * H
+    off = np.zeros((n, 2), dtype)
+    off[:H, 0], off[H:, 0] = -1.0, 1.0
+    edges = EdgeSet(
+        x=jnp.asarray(x), y=jnp.asarray(y), disparity=jnp.asarray(d),
+        confidence=jnp.ones(n, dtype), visible=jnp.ones(n, bool), lab=jnp.zeros((n, 3), dtype),
+        direction=jnp.full(n, HORIZONTAL, jnp.int32), intercepts=jnp.zeros((n, 2), dtype),
+        valid=jnp.ones(n, bool), n_dropped=jnp.zeros((), jnp.int32),
+    )
+    return edges, jnp.asarray(off), jnp.ones(n, dtype)
+
+
+def test_centre_oracle_accuracy(small_scene):
+    lf, edges, surface = small_scene
+    d = jax.jit(centre_disparity)(edges, surface, lf.centre_view, ReconstructConfig())
+    mse = 100 * float(jnp.mean((d - lf.centre_gt) ** 2))
+    bad = 100 * float(jnp.mean(jnp.abs(d - lf.centre_gt) > 0.07))
+    assert d.shape == lf.centre_gt.shape and d.dtype == jnp.float32
+    assert mse < 0.5, mse
+    assert bad < 10.0, bad
+
+
+def test_surface_vectors_sharpen_the_step():
+    # Labels sit on the two boundary columns; offsetting them towards their own side keeps
+    # the step where the colour edge is, splatting them in place still puts every label on
+    # its own side here, but offsetting the wrong way swaps the sides of the boundary pixels.
+    H, W, split = 24, 32, 15
+    img = two_region_view(H, W, split)
+    edges, off, step = _step_edges(H, split, 1.0, -1.0)
+    conf = jnp.zeros((H, W))
+    truth = np.where(np.arange(W)[None] <= split, 1.0, -1.0) * np.ones((H, 1))
+    cfg = ReconstructConfig()
+    errs = {}
+    for name, o in (("right", off), ("wrong", -off)):
+        d = centre_disparity(edges, OracleSurface(o, step, conf), img, cfg)
+        errs[name] = float(jnp.mean(jnp.abs(d - truth)))
+    assert errs["right"] < 0.02, errs
+    assert errs["wrong"] > 5 * errs["right"], errs
+
+
+def test_depth_edge_confidence_blocks_leakage():
+    # Labels only at the far left and right borders; the colour edge is weak (similar colours)
+    # so without the confidence map the two labels blend; the depth-edge confidence on the
+    # boundary keeps the step.
+    H, W, split = 16, 40, 19
+    img = np.full((H, W, 3), 0.5, np.float32)
+    img[:, split + 1 :] += 0.01
+    xs = np.concatenate([np.zeros(H), np.full(H, W - 1)]).astype(np.float32)
+    ys = np.tile(np.arange(H, dtype=np.float32), 2)
+    d = np.concatenate([np.full(H, 1.0), np.full(H, -1.0)]).astype(np.float32)
+    n = 2 * H
+    edges = EdgeSet(
+        x=jnp.asarray(xs), y=jnp.asarray(ys), disparity=jnp.asarray(d), confidence=jnp.ones(n),
+        visible=jnp.ones(n, bool), lab=jnp.zeros((n, 3)), direction=jnp.zeros(n, jnp.int32),
+        intercepts=jnp.zeros((n, 2)), valid=jnp.ones(n, bool), n_dropped=jnp.zeros((), jnp.int32),
+    )
+    conf = np.zeros((H, W), np.float32)
+    conf[:, split : split + 2] = 1.0
+    truth = np.where(np.arange(W)[None] <= split, 1.0, -1.0) * np.ones((H, 1))
+    z = jnp.zeros((n, 2))
+    out = {}
+    for beta in (0.0, 1000.0):
+        cfg = ReconstructConfig(conf_beta=beta)
+        dd = centre_disparity(edges, OracleSurface(z, jnp.ones(n), jnp.asarray(conf)), img, cfg)
+        out[beta] = float(jnp.mean(jnp.abs(dd - truth)))
+    assert out[1000.0] < 0.05, out
+    assert out[0.0] > 0.3, out
+
+
+def test_centre_gradients_wrt_hyperparameters(x64):
+    H, W, split = 6, 8, 3
+    img = jnp.asarray(two_region_view(H, W, split), jnp.float64)
+    edges, off, _ = _step_edges(H, split, 0.7, -0.4, np.float64)
+    step = jnp.linspace(0.1, 0.9, edges.capacity)
+    conf = jnp.linspace(0.0, 1.0, H * W).reshape(H, W)
+    surface = OracleSurface(off * 0.7, step, conf)
+    solver = SolverConfig(preconditioner="jacobi", rtol=1e-13, max_iters=2000)
+    # Perturb labels so that every hyperparameter matters.
+    edges = EdgeSet(**{**{f: getattr(edges, f) for f in edges.__dataclass_fields__},
+                       "disparity": edges.disparity + jnp.linspace(-0.2, 0.3, edges.capacity)})
+    w = jnp.asarray(np.random.default_rng(0).normal(size=(H, W)))
+
+    def loss(omega, a, c, beta):
+        cfg = ReconstructConfig(omega=omega, a=a, centre_c=c, conf_beta=beta, solver=solver)
+        return jnp.sum(w * centre_disparity(edges, surface, img, cfg))
+
+    args = (jnp.float64(2.0), jnp.float64(1.5), jnp.float64(0.8), jnp.float64(3.0))
+    assert jnp.isfinite(jax.grad(loss, argnums=(0, 1, 2, 3))(*args)[0])
+    check_grads(loss, args, order=1, modes=("rev",), eps=1e-6)
+
+
+def test_centre_vmap_over_hyperparameter(small_scene):
+    lf, edges, surface = small_scene
+    f = jax.vmap(lambda om: centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=om)))
+    out = f(jnp.asarray([50.0, 150.0]))
+    assert out.shape == (2,) + lf.centre_gt.shape
+    single = centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=50.0))
+    np.testing.assert_allclose(out[0], single, atol=2e-3)
+
+
+def test_centre_upsampled_grid(small_scene):
+    lf, edges, surface = small_scene
+    d = centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(upsample=2))
+    assert d.shape == lf.centre_gt.shape
+    assert 100 * float(jnp.mean((d - lf.centre_gt) ** 2)) < 1.0
+
+
+def test_centre_bad_input(small_scene):
+    lf, edges, surface = small_scene
+    with pytest.raises(ValueError, match="centre_view"):
+        centre_disparity(edges, surface, lf.centre_view[..., :2])
+    bad = OracleSurface(surface.offset[:-1], surface.step_response, surface.depth_edge_confidence)
+    with pytest.raises(ValueError, match="offset"):
+        centre_disparity(edges, bad, lf.centre_view)
+    bad = OracleSurface(surface.offset, surface.step_response, surface.depth_edge_confidence[:-1])
+    with pytest.raises(ValueError, match="depth_edge_confidence"):
+        centre_disparity(edges, bad, lf.centre_view)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(omega=-1.0), dict(centre_eps=0.0), dict(upsample=3), dict(colour_space="hsv"),
+     dict(wmf_weight="x"), dict(hole_fill="none"), dict(wmf_radius=0), dict(epi_c=float("nan"))],
+)
+def test_config_validation(kwargs):
+    with pytest.raises(ValueError):
+        ReconstructConfig(**kwargs)
