@@ -22,3 +22,9 @@ from ._pfm import read_pfm as read_pfm
 from ._pfm import write_pfm as write_pfm
 from ._results import OutputWriter as OutputWriter
 from ._results import check_output_dir as check_output_dir
+from ._colmap import ColmapCamera as ColmapCamera
+from ._colmap import ColmapImage as ColmapImage
+from ._colmap import ColmapModel as ColmapModel
+from ._colmap import ColmapPoints as ColmapPoints
+from ._colmap import read_colmap_text as read_colmap_text
+from ._colmap import write_colmap_text as write_colmap_text
