@@ -13,6 +13,7 @@ from ._edgeset import EdgeSet as EdgeSet
 from ._edgeset import concatenate as concatenate
 from ._fit import fit_lines as fit_lines
 from ._pipeline import detect_edges as detect_edges
+from ._pipeline import soft_edge_maps as soft_edge_maps
 from ._render import point_errors as point_errors
 from ._render import render_overlay as render_overlay
 from ._render import render_sparse_disparity as render_sparse_disparity

@@ -10,12 +10,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from ..lightfield import LightField
 from ._bank import bank_width, blur_images, filter_disparities, prewitt_bank
 from ._config import EdgeConfig
-from ._detect import detect_centre_row, local_std, non_max_suppress, parabola_offset, top_candidates
+from ._detect import (
+    detect_centre_row,
+    local_std,
+    non_max_suppress,
+    parabola_offset,
+    soft_detect,
+    top_candidates,
+)
 from ._edgeset import HORIZONTAL, VERTICAL, EdgeSet, concatenate
 from ._fit import fit_lines
 from ._global import reject_outliers, trilateral_filter
@@ -328,7 +335,14 @@ def _detect_arrays(row_views, col_views, config: EdgeConfig, d_max: float, key) 
         edges = eqx.tree_at(lambda e: e.valid, edges, edges.valid & keep)
     if config.trilateral:
         d = trilateral_filter(edges, (H, W), config)
-        edges = eqx.tree_at(lambda e: e.disparity, edges, d)
+        # Keep the intercepts on the filtered line through the same centre-view position.
+        n = jnp.where(edges.direction == HORIZONTAL, row_views.shape[0], col_views.shape[0])
+        pos = jnp.where(edges.direction == HORIZONTAL, edges.x, edges.y)
+        top = pos + (n // 2) * d
+        bottom = pos - (n - 1 - n // 2) * d
+        edges = eqx.tree_at(
+            lambda e: (e.disparity, e.intercepts), edges, (d, jnp.stack([top, bottom], -1))
+        )
     return edges
 
 
@@ -336,14 +350,33 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
     """Multi-view edge points of a light field's central cross-hair of views.
 
     Every EPI of the central row of views (one per pixel row) and of the central column (one per
-    pixel column) is filtered with the oriented Prewitt bank; centre-row maxima become lines
-    (confidence-ordered fitting with λ suppression), refined to sub-pixel disparity, filtered,
-    and reported as centre-view points. Horizontal and vertical sets are merged.
+    pixel column) is processed on its centre row (the centre view), then the two sets are
+    merged. With the default `EdgeConfig`:
+
+    1. CIELAB / 100, Gaussian pre-blur (0.85 px); filter-bank responses (Alg. 1, 61 filters
+       over ``±d_max``) on the centre row, label = argmax, confidence = max x 3x3 EPI std.
+       Every pixel is a candidate (``nms=False``; NMS is optional).
+    2. Sub-pixel disparity: parabola through the neighbouring filters' responses, then a search
+       minimising the colour variance along the EPI line on the less-varying side of the edge
+       (grid over ``±1.5`` filter spacings + Gauss–Newton polish, cubic sampling).
+    3. A candidate is kept only when its variance minimum is distinct (``min_ratio``: the
+       variance ``1.5`` spacings away is at least 3x the minimum): flat or ambiguous lines
+       are dropped, since a wrong label costs more downstream than a missing one.
+    4. Line fitting in confidence order with λ suppression (4.1.2; λ = 0 by default).
+    5. Outlier rejection by same-disparity neighbours (4.1.3, eqs 4.1–4.2).
+    6. Trilateral filter of the sparse disparities (eq 4.6, radius 3).
+
+    Optional stages: gradient-alignment test (eq 4.3), dropping points not visible in the
+    centre view (eq 4.4; the ``visible`` flag is always computed), entropy-based random search
+    of the intercepts (eq 4.5), spatial multi-scale (4.1.4). `EdgeConfig` documents every
+    option; ``experiments/bench_edges.py`` measures each stage's effect.
 
     Args:
         lf: the light field (only the central row and column of views are read).
         config: `EdgeConfig`.
-        key: PRNG key of the entropy search (``None``: ``jax.random.key(0)``).
+        key: PRNG key of the entropy search (``None``: ``jax.random.key(0)``). The bank's
+            half-range ``d_max`` comes from ``config.d_max``, else from the scene's
+            ``disparity_range`` (+ ``config.d_margin``), else ``config.d_max_fallback``.
 
     Returns:
         An `EdgeSet` of capacity ``H * K_h + W * K_v`` (one direction only: the matching term),
@@ -393,3 +426,56 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
             stacklevel=2,
         )
     return edges
+
+
+def soft_edge_maps(
+    views: Float[Array, "n H W 3"],
+    *,
+    d_max: float,
+    n_filters: int = 61,
+    presmooth_sigma: Float[ArrayLike, ""] = 0.85,
+    temperature: Float[ArrayLike, ""] = 0.02,
+    edge_shift: Float[ArrayLike, ""] = 1.0,
+    aa_sigma: Float[ArrayLike, ""] = 0.0,
+    blur_radius: int = 3,
+    direction: int = HORIZONTAL,
+) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
+    """Differentiable (soft) edge detection on the centre view of a row or column of views.
+
+    The same pre-processing as `detect_edges` (CIELAB / 100, Gaussian pre-blur, Prewitt bank),
+    then `soft_detect`: a softmax over the filter responses instead of argmax / max. Gradients
+    reach the views, ``presmooth_sigma``, ``temperature``, ``edge_shift`` and ``aa_sigma``.
+
+    Args:
+        views: ``(n, H, W, 3)`` RGB in [0, 1]: the central row of views (``direction =
+            HORIZONTAL``) or the central column (``VERTICAL``), ``n >= 3``.
+        d_max: the bank covers ``[-d_max, d_max]`` (static).
+        n_filters: number of filters (static).
+        presmooth_sigma: pre-blur, pixels.
+        temperature: softmax temperature (response units, LAB / 100).
+        edge_shift, aa_sigma: see `prewitt_bank`.
+        blur_radius: pre-blur kernel half-width (static).
+        direction: `HORIZONTAL` or `VERTICAL` EPIs.
+
+    Returns:
+        ``(disparity, confidence)``, each ``(H, W)``: expected disparity and soft confidence of
+        every centre-view pixel.
+
+    Raises:
+        ValueError: fewer than 3 views or a bad shape.
+
+    References:
+        Thesis Alg. 1, relaxed (softmax for argmax).
+    """
+    if views.ndim != 4 or views.shape[-1] != 3 or views.shape[0] < 3:
+        raise ValueError(f"views must have shape (n >= 3, H, W, 3); got {tuple(views.shape)}")
+    n = views.shape[0]
+    h = n if n % 2 else n + 1
+    disps = filter_disparities(n_filters, d_max).astype(jnp.result_type(views, jnp.float32))
+    bank = prewitt_bank(
+        disps, h, bank_width(h, d_max, 1.5) + 2, shift=edge_shift, aa_sigma=aa_sigma
+    )
+    blur = blur_images(_srgb_to_lab(views) * _LAB_SCALE, presmooth_sigma, blur_radius)
+    perm = (1, 0, 2, 3) if direction == HORIZONTAL else (2, 0, 1, 3)
+    d, c = soft_detect(jnp.transpose(blur, perm), bank, disps, temperature)
+    return (d, c) if direction == HORIZONTAL else (d.T, c.T)

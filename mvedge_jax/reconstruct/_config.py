@@ -12,6 +12,7 @@ from ._wmf import WEIGHT_TYPES
 
 COLOUR_SPACES = ("lab", "rgb")
 HOLE_FILLS = ("solve", "background")
+MERGES = ("photo", "mean")
 
 
 def _f32(x) -> Array:
@@ -47,6 +48,9 @@ class ReconstructConfig(eqx.Module):
         epi_data_weight: data weight on reprojected pixels (eq 6.8; thesis 15).
         epi_centre_weight: data weight of the centre view's row of every EPI (the estimated
             map itself; large = the centre view keeps its estimate).
+        epi_photo_sigma: colour scale (RGB) of the photometric confidence of reprojected
+            pixels (`photometric_confidence`), which multiplies ``epi_data_weight``; large =
+            off.
         epi_hole_weight: weight of the background prior in reprojection holes.
         epi_line_scale: multiplier of ``λ_e`` on EPI-line pixels (eq 6.8; thesis 1).
         epi_line_floor: minimum line weight (so that lines with ``λ_e ≈ 0`` still guide).
@@ -71,11 +75,11 @@ class ReconstructConfig(eqx.Module):
             median.
         refine_radius: window radius of that test (candidates: window min and max).
         refine_iterations: passes of the centre-view refinement.
-        refine_views: refine every other view too (after inpainting / merging), with the
-            cross-hair views as the colour reference.
-        refine_view_iterations: passes of the per-view refinement.
+        refine_aggregate: radius of the colour-weighted cost aggregation of that test.
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
             (nearest valid farther value along the row) for off-cross-hair views.
+        merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
+            off-cross-hair view) or ``"mean"`` (the thesis' plain mean).
         crack_parallax: forwarded to `forward_project`.
         solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
         epi_solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
@@ -94,17 +98,18 @@ class ReconstructConfig(eqx.Module):
     lambda_e_max: Array = eqx.field(converter=_f32, default=2.0)
     offset_scale: Array = eqx.field(converter=_f32, default=1.0)
     centre_c: Array = eqx.field(converter=_f32, default=1.0)
-    centre_eps: Array = eqx.field(converter=_f32, default=1e-2)
+    centre_eps: Array = eqx.field(converter=_f32, default=1e-3)
     conf_beta: Array = eqx.field(converter=_f32, default=10.0)
     wmf_sigma: Array = eqx.field(converter=_f32, default=0.1)
     epi_data_weight: Array = eqx.field(converter=_f32, default=15.0)
     epi_centre_weight: Array = eqx.field(converter=_f32, default=1000.0)
+    epi_photo_sigma: Array = eqx.field(converter=_f32, default=0.1)
     epi_hole_weight: Array = eqx.field(converter=_f32, default=1.0)
     epi_line_scale: Array = eqx.field(converter=_f32, default=1.0)
     epi_line_floor: Array = eqx.field(converter=_f32, default=0.1)
     epi_occlusion_tol: Array = eqx.field(converter=_f32, default=0.1)
     epi_c: Array = eqx.field(converter=_f32, default=0.1)
-    epi_eps: Array = eqx.field(converter=_f32, default=1e-2)
+    epi_eps: Array = eqx.field(converter=_f32, default=1e-3)
     refine_jump: Array = eqx.field(converter=_f32, default=0.2)
     refine_margin: Array = eqx.field(converter=_f32, default=0.0)
     fill_c: Array = eqx.field(converter=_f32, default=1.0)
@@ -118,9 +123,9 @@ class ReconstructConfig(eqx.Module):
     refine: bool = eqx.field(static=True, default=True)
     refine_radius: int = eqx.field(static=True, default=3)
     refine_iterations: int = eqx.field(static=True, default=8)
-    refine_views: bool = eqx.field(static=True, default=True)
-    refine_view_iterations: int = eqx.field(static=True, default=2)
+    refine_aggregate: int = eqx.field(static=True, default=2)
     hole_fill: str = eqx.field(static=True, default="solve")
+    merge: str = eqx.field(static=True, default="photo")
     crack_parallax: float = eqx.field(static=True, default=0.5)
     solver: SolverConfig = SolverConfig()
     epi_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
@@ -131,7 +136,7 @@ class ReconstructConfig(eqx.Module):
                   "epi_centre_weight", "epi_hole_weight",
                   "epi_line_scale", "epi_line_floor", "epi_occlusion_tol", "epi_c", "fill_c", "fill_data_weight",
                   "refine_jump", "refine_margin")
-        positive = ("centre_eps", "wmf_sigma", "epi_eps")
+        positive = ("centre_eps", "wmf_sigma", "epi_eps", "epi_photo_sigma")
         for name in nonneg + positive:
             v = _concrete(getattr(self, name))
             if v is None:
@@ -153,13 +158,15 @@ class ReconstructConfig(eqx.Module):
             raise ValueError(
                 f"ReconstructConfig.wmf_weight must be one of {WEIGHT_TYPES}; got {self.wmf_weight!r}"
             )
-        if int(self.refine_radius) < 1 or int(self.refine_iterations) < 0 or int(
-            self.refine_view_iterations
-        ) < 0:
+        if (
+            int(self.refine_radius) < 1
+            or int(self.refine_iterations) < 0
+            or int(self.refine_aggregate) < 0
+        ):
             raise ValueError(
-                f"ReconstructConfig.refine_radius must be >= 1 and the refine iterations >= 0; "
-                f"got {self.refine_radius}, {self.refine_iterations}, "
-                f"{self.refine_view_iterations}"
+                f"ReconstructConfig.refine_radius must be >= 1, refine_iterations and "
+                f"refine_aggregate >= 0; got {self.refine_radius}, {self.refine_iterations}, "
+                f"{self.refine_aggregate}"
             )
         if int(self.wmf_radius) < 1 or int(self.wmf_iterations) < 1:
             raise ValueError(
@@ -170,6 +177,8 @@ class ReconstructConfig(eqx.Module):
             raise ValueError(
                 f"ReconstructConfig.hole_fill must be one of {HOLE_FILLS}; got {self.hole_fill!r}"
             )
+        if self.merge not in MERGES:
+            raise ValueError(f"ReconstructConfig.merge must be one of {MERGES}; got {self.merge!r}")
         if not self.crack_parallax >= 0:
             raise ValueError(
                 f"ReconstructConfig.crack_parallax must be >= 0; got {self.crack_parallax}"

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..edges import EdgeSet
-from ..lightfield import forward_project
+from ..lightfield import backward_warp, forward_project
 from ..solve import guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 
@@ -47,6 +47,40 @@ def project_cross_hair(
     ph, vh = jax.vmap(proj)(jnp.stack([zv, dc], axis=1))
     pv, vv = jax.vmap(proj)(jnp.stack([dr, zu], axis=1))
     return ph, vh, pv, vv
+
+
+def photometric_confidence(
+    projected: Float[Array, "K H W"],
+    offsets: Float[Array, "K 2"],
+    source: Float[Array, "H W C"],
+    targets: Float[Array, "K H W C"],
+    sigma: Array,
+) -> Float[Array, "K H W"]:
+    """Colour agreement of reprojected disparities with the views they were projected into.
+
+    A pixel of view ``k`` holding the reprojected disparity ``d`` came from the source pixel
+    ``(x + dc d, y + dr d)``; its confidence is ``exp(-(|I_k(x, y) − I_src(x + dc d, y + dr d)|
+    / σ)²)`` (Euclidean colour distance). Wrongly placed pixels at occlusion boundaries (a
+    foreground value on a background-coloured pixel, from sub-pixel rounding) get a low
+    confidence.
+
+    Args:
+        projected: ``(K, H, W)`` disparities reprojected into the ``K`` views.
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each view relative to the source view.
+        source: ``(H, W, C)`` colour of the source view.
+        targets: ``(K, H, W, C)`` colours of the ``K`` views (same units as ``source``).
+        sigma: colour scale σ.
+
+    Returns:
+        ``(K, H, W)`` confidence in ``[0, 1]``.
+    """
+
+    def one(p, off, img):
+        back = backward_warp(source, p, -off)
+        dist2 = jnp.sum((back - img) ** 2, axis=-1)
+        return jnp.exp(-dist2 / (sigma * sigma))
+
+    return jax.vmap(one)(projected, offsets, targets)
 
 
 def rasterise_lines(
@@ -115,6 +149,7 @@ def inpaint_epis(
     line_weight: Float[Array, "S A L"],
     line_label: Float[Array, "S A L"],
     config: ReconstructConfig,
+    confidence: Float[Array, "S A L"] | None = None,
 ) -> Float[Array, "S A L"]:
     """Solve eq 6.4 on every EPI of a stack (batched `solve_poisson`).
 
@@ -133,6 +168,8 @@ def inpaint_epis(
         epi_guide: ``(S, A, L, C)`` EPI colours (guide units).
         line_weight, line_label: ``(S, A, L)`` from `rasterise_lines`.
         config: `ReconstructConfig`.
+        confidence: optional ``(S, A, L)`` factor in ``[0, 1]`` on the reprojection weight
+            (`photometric_confidence`); the centre row is never down-weighted.
 
     Returns:
         ``(S, A, L)`` inpainted disparity.
@@ -146,6 +183,9 @@ def inpaint_epis(
     # Reprojected pixels; the centre row (the view the map was estimated in) can be pinned.
     row_w = jnp.where(jnp.arange(A) == A // 2, config.epi_centre_weight, config.epi_data_weight)
     cw = jnp.where(valid, row_w[None, :, None], 0.0)
+    if confidence is not None:
+        is_centre = (jnp.arange(A) == A // 2)[None, :, None]
+        cw = cw * jnp.where(is_centre, 1.0, confidence)
     # Holes are disocclusions: prior = the farther of the nearest valid values along the
     # spatial axis (the background), weight epi_hole_weight.
     bg = jax.vmap(jax.vmap(_background_1d))(projected, valid)

@@ -16,7 +16,13 @@ from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
 from ._centre import _check_inputs, centre_disparity, colour_guide
 from ._config import ReconstructConfig
-from ._crosshair import edge_lines, inpaint_epis, project_cross_hair, rasterise_lines
+from ._crosshair import (
+    edge_lines,
+    inpaint_epis,
+    photometric_confidence,
+    project_cross_hair,
+    rasterise_lines,
+)
 from ._photo import photo_refine
 from ._wmf import weighted_median_filter
 
@@ -77,33 +83,54 @@ def background_fill(values: Float[Array, "H W"], valid: Bool[Array, "H W"]) -> F
 def merge_reprojections(
     cross_h: Float[Array, "V H W"],
     cross_v: Float[Array, "U H W"],
+    views: Float[Array, "U V H W 3"],
     row: Array,
     col: Array,
-    *,
-    crack_parallax: float,
-) -> tuple[Float[Array, "H W"], Bool[Array, "H W"]]:
-    """Mean of the reprojections of views ``(U//2, col)`` and ``(row, V//2)`` into view
-    ``(row, col)`` (thesis Sec. 6.1, "Non-cross-hair View Reprojection"); where only one
-    lands, that one. Returns the merged map and its validity."""
+    config: ReconstructConfig,
+) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
+    """Merge the reprojections of views ``(U//2, col)`` and ``(row, V//2)`` into view
+    ``(row, col)`` (thesis Sec. 6.1, "Non-cross-hair View Reprojection").
+
+    ``config.merge == "mean"``: the mean where both land (the thesis); ``"photo"``: the mean
+    weighted by each reprojection's `photometric_confidence` against view ``(row, col)``
+    (occlusion-aware: a value whose colour does not match loses). Where only one lands, that
+    one. Returns the merged map and its confidence (0 at holes; 1 or the best photometric
+    confidence elsewhere).
+    """
     U = cross_v.shape[0]
     V = cross_h.shape[0]
-    dr = (row - U // 2).astype(jnp.float32)
-    dc = (col - V // 2).astype(jnp.float32)
-    zero = jnp.zeros((), jnp.float32)
-    a, va = forward_project(cross_h[col], jnp.stack([dr, zero]), crack_parallax=crack_parallax)
-    b, vb = forward_project(cross_v[row], jnp.stack([zero, dc]), crack_parallax=crack_parallax)
-    n = va.astype(a.dtype) + vb.astype(a.dtype)
-    s = jnp.where(va, a, 0.0) + jnp.where(vb, b, 0.0)
-    return jnp.where(n > 0, s / jnp.maximum(n, 1.0), 0.0), n > 0
+    rc, cc = U // 2, V // 2
+    dr = (row - rc).astype(cross_h.dtype)
+    dc = (col - cc).astype(cross_h.dtype)
+    zero = jnp.zeros((), cross_h.dtype)
+    off_a = jnp.stack([dr, zero])
+    off_b = jnp.stack([zero, dc])
+    cp = config.crack_parallax
+    a, va = forward_project(cross_h[col], off_a, crack_parallax=cp)
+    b, vb = forward_project(cross_v[row], off_b, crack_parallax=cp)
+    if config.merge == "photo":
+        target = views[row, col][None]
+        wa = photometric_confidence(a[None], off_a[None], views[rc, col], target, config.epi_photo_sigma)[0]
+        wb = photometric_confidence(b[None], off_b[None], views[row, cc], target, config.epi_photo_sigma)[0]
+        wa = jnp.where(va, jnp.maximum(wa, 1e-6), 0.0)
+        wb = jnp.where(vb, jnp.maximum(wb, 1e-6), 0.0)
+        conf = jnp.maximum(wa, wb)
+    else:
+        wa = va.astype(a.dtype)
+        wb = vb.astype(a.dtype)
+        conf = jnp.maximum(wa, wb)
+    n = wa + wb
+    s = wa * jnp.where(va, a, 0.0) + wb * jnp.where(vb, b, 0.0)
+    return jnp.where(n > 0, s / jnp.where(n > 0, n, 1.0), 0.0), conf
 
 
-def _fill_view(values, valid, guide, config: ReconstructConfig):
+def _fill_view(values, conf, guide, config: ReconstructConfig):
+    valid = conf > 0
     filled = background_fill(values, valid)
     if config.hole_fill == "background":
         return filled
-    lam = jnp.where(valid, config.fill_data_weight, 0.0)
+    lam = config.fill_data_weight * conf + jnp.where(valid, 0.0, config.epi_hole_weight)
     wx, wy = guide_edge_weights(guide, scale=config.fill_c, eps=config.epi_eps)
-    lam = jnp.where(jnp.any(valid), lam, 1.0)  # all-invalid view: keep the background fill
     return solve_poisson(lam, filled, wx, wy, x0=filled, config=config.fill_solver).x
 
 
@@ -113,7 +140,7 @@ def _cross_hair_views(views: Array) -> tuple[Array, Array]:
     rc, cc = U // 2, V // 2
     pos = [(rc, c) for c in range(V)] + [(r, cc) for r in range(U) if r != rc]
     idx = np.asarray(pos)
-    return views[idx[:, 0], idx[:, 1]], jnp.asarray(idx, jnp.float32)
+    return views[idx[:, 0], idx[:, 1]], jnp.asarray(idx, views.dtype)
 
 
 def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, iterations: int):
@@ -130,6 +157,7 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
         jump=config.refine_jump,
         margin=config.refine_margin,
         iterations=iterations,
+        aggregate=config.refine_aggregate,
     )
 
 
@@ -151,7 +179,8 @@ def reconstruct(
        edge points (including points not visible in the centre view), smoothness
        ``epi_c / (|∇I_EPI| + epi_eps)``; one batched `solve_poisson` per direction.
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
-       vertical cross-hair views; remaining holes filled (``config.hole_fill``).
+       vertical cross-hair views (weighted by their photometric confidence with
+       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
 
     The centre view's output is the mean of its two inpainted versions (row and column).
     jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept without
@@ -209,31 +238,21 @@ def reconstruct(
     gv = jnp.transpose(colour_guide(views[:, cc], config.colour_space), (2, 0, 1, 3))
     lwh, llh = rasterise_lines(qy, qx, d, lw, (H, V, W))
     lwv, llv = rasterise_lines(qx, qy, d, lw, (W, U, H))
+    zv, zu = jnp.zeros((V,)), jnp.zeros((U,))
+    off_h = jnp.stack([zv, jnp.arange(V) - cc], axis=1).astype(views.dtype)
+    off_v = jnp.stack([jnp.arange(U) - rc, zu], axis=1).astype(views.dtype)
+    ch = photometric_confidence(ph, off_h, centre_view, views[rc], config.epi_photo_sigma)
+    cv = photometric_confidence(pv, off_v, centre_view, views[:, cc], config.epi_photo_sigma)
     eh = inpaint_epis(
-        jnp.transpose(ph, (1, 0, 2)), jnp.transpose(vh, (1, 0, 2)), gh, lwh, llh, config
+        jnp.transpose(ph, (1, 0, 2)), jnp.transpose(vh, (1, 0, 2)), gh, lwh, llh, config,
+        jnp.transpose(ch, (1, 0, 2)),
     )
     ev = inpaint_epis(
-        jnp.transpose(pv, (2, 0, 1)), jnp.transpose(vv, (2, 0, 1)), gv, lwv, llv, config
+        jnp.transpose(pv, (2, 0, 1)), jnp.transpose(vv, (2, 0, 1)), gv, lwv, llv, config,
+        jnp.transpose(cv, (2, 0, 1)),
     )
     cross_h = jnp.transpose(eh, (1, 0, 2))  # (V, H, W)
     cross_v = jnp.transpose(ev, (1, 2, 0))  # (U, H, W)
-    if config.refine_views:
-        it = config.refine_view_iterations
-        cols_all = jnp.arange(V, dtype=jnp.int32)
-        rows_all = jnp.arange(U, dtype=jnp.int32)
-        cross_h = lax.map(
-            lambda a: jnp.where(
-                a[1] == cc, a[0], _refine(a[0], rc_j, a[1], views, ch_views, ch_pos, config, it)
-            ),
-            (cross_h, cols_all),
-        )
-        cross_v = lax.map(
-            lambda a: jnp.where(
-                a[1] == rc, a[0], _refine(a[0], a[1], cc_j, views, ch_views, ch_pos, config, it)
-            ),
-            (cross_v, rows_all),
-        )
-
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
     disparity = jnp.zeros((U, V, H, W), jnp.float32)
     disparity = disparity.at[rc, :].set(cross_h)
@@ -245,16 +264,9 @@ def reconstruct(
 
         def one(rc_pair):
             r, c = rc_pair
-            vals, ok = merge_reprojections(
-                cross_h, cross_v, r, c, crack_parallax=config.crack_parallax
-            )
+            vals, conf = merge_reprojections(cross_h, cross_v, views, r, c, config)
             guide = colour_guide(views[r, c], config.colour_space)
-            filled = _fill_view(vals, ok, guide, config)
-            if config.refine_views:
-                filled = _refine(
-                    filled, r, c, views, ch_views, ch_pos, config, config.refine_view_iterations
-                )
-            return filled
+            return _fill_view(vals, conf, guide, config)
 
         off = lax.map(one, (rows_j, cols_j))
         disparity = disparity.at[rows_j, cols_j].set(off)

@@ -104,3 +104,33 @@ def test_detect_shapes_and_bad_input(make_step_epi):
         detect_centre_row(jnp.zeros((2, 1, 64, 3)), bank)
     with pytest.raises(ValueError, match="shape"):
         detect_centre_row(jnp.zeros((9, 64, 3)), bank)
+
+
+def test_soft_edge_maps_gradients_reach_views_and_parameters(x64, make_texture):
+    from mvedge_jax.edges import soft_edge_maps
+
+    t = make_texture(7, fmax=0.15)
+    a = np.arange(5) - 2
+    xs = np.arange(20)
+    views = np.stack([np.repeat(t(xs + ai * 0.4)[None], 6, axis=0) for ai in a])  # (5, 6, 20, 3)
+    views = jnp.asarray(np.clip(views, 0.05, 0.95), jnp.float64)
+
+    @jax.jit
+    def loss(views, sigma, temperature):
+        d, c = soft_edge_maps(
+            views,
+            d_max=1.0,
+            n_filters=9,
+            presmooth_sigma=sigma,
+            temperature=temperature,
+            aa_sigma=0.4,
+            blur_radius=2,
+        )
+        return jnp.sum((d[:, 6:14] - 0.4) ** 2 * c[:, 6:14])
+
+    args = (views, jnp.float64(0.85), jnp.float64(0.05))
+    check_grads(loss, args, order=1, modes=("rev",), eps=1e-6)
+    d, c = soft_edge_maps(views, d_max=1.0, n_filters=9, aa_sigma=0.4)
+    assert d.shape == (6, 20) and c.shape == (6, 20)
+    with pytest.raises(ValueError, match="n >= 3"):
+        soft_edge_maps(views[:2], d_max=1.0)

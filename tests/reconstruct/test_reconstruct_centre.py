@@ -6,8 +6,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import two_region_view
 from jax.test_util import check_grads
+from reconstruct_helpers import two_region_view
 
 from mvedge_jax.edges import HORIZONTAL, EdgeSet
 from mvedge_jax.reconstruct import OracleSurface, ReconstructConfig, centre_disparity
@@ -26,10 +26,16 @@ def _step_edges(H: int, split: int, d_left: float, d_right: float, dtype=np.floa
     off = np.zeros((n, 2), dtype)
     off[:H, 0], off[H:, 0] = -1.0, 1.0
     edges = EdgeSet(
-        x=jnp.asarray(x), y=jnp.asarray(y), disparity=jnp.asarray(d),
-        confidence=jnp.ones(n, dtype), visible=jnp.ones(n, bool), lab=jnp.zeros((n, 3), dtype),
-        direction=jnp.full(n, HORIZONTAL, jnp.int32), intercepts=jnp.zeros((n, 2), dtype),
-        valid=jnp.ones(n, bool), n_dropped=jnp.zeros((), jnp.int32),
+        x=jnp.asarray(x),
+        y=jnp.asarray(y),
+        disparity=jnp.asarray(d),
+        confidence=jnp.ones(n, dtype),
+        visible=jnp.ones(n, bool),
+        lab=jnp.zeros((n, 3), dtype),
+        direction=jnp.full(n, HORIZONTAL, jnp.int32),
+        intercepts=jnp.zeros((n, 2), dtype),
+        valid=jnp.ones(n, bool),
+        n_dropped=jnp.zeros((), jnp.int32),
     )
     return edges, jnp.asarray(off), jnp.ones(n, dtype)
 
@@ -74,9 +80,16 @@ def test_depth_edge_confidence_blocks_leakage():
     d = np.concatenate([np.full(H, 1.0), np.full(H, -1.0)]).astype(np.float32)
     n = 2 * H
     edges = EdgeSet(
-        x=jnp.asarray(xs), y=jnp.asarray(ys), disparity=jnp.asarray(d), confidence=jnp.ones(n),
-        visible=jnp.ones(n, bool), lab=jnp.zeros((n, 3)), direction=jnp.zeros(n, jnp.int32),
-        intercepts=jnp.zeros((n, 2)), valid=jnp.ones(n, bool), n_dropped=jnp.zeros((), jnp.int32),
+        x=jnp.asarray(xs),
+        y=jnp.asarray(ys),
+        disparity=jnp.asarray(d),
+        confidence=jnp.ones(n),
+        visible=jnp.ones(n, bool),
+        lab=jnp.zeros((n, 3)),
+        direction=jnp.zeros(n, jnp.int32),
+        intercepts=jnp.zeros((n, 2)),
+        valid=jnp.ones(n, bool),
+        n_dropped=jnp.zeros((), jnp.int32),
     )
     conf = np.zeros((H, W), np.float32)
     conf[:, split : split + 2] = 1.0
@@ -100,8 +113,12 @@ def test_centre_gradients_wrt_hyperparameters(x64):
     surface = OracleSurface(off * 0.7, step, conf)
     solver = SolverConfig(preconditioner="jacobi", rtol=1e-13, max_iters=2000)
     # Perturb labels so that every hyperparameter matters.
-    edges = EdgeSet(**{**{f: getattr(edges, f) for f in edges.__dataclass_fields__},
-                       "disparity": edges.disparity + jnp.linspace(-0.2, 0.3, edges.capacity)})
+    edges = EdgeSet(
+        **{
+            **{f: getattr(edges, f) for f in edges.__dataclass_fields__},
+            "disparity": edges.disparity + jnp.linspace(-0.2, 0.3, edges.capacity),
+        }
+    )
     w = jnp.asarray(np.random.default_rng(0).normal(size=(H, W)))
 
     def loss(omega, a, c, beta):
@@ -115,7 +132,9 @@ def test_centre_gradients_wrt_hyperparameters(x64):
 
 def test_centre_vmap_over_hyperparameter(small_scene):
     lf, edges, surface = small_scene
-    f = jax.vmap(lambda om: centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=om)))
+    f = jax.vmap(
+        lambda om: centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=om))
+    )
     out = f(jnp.asarray([50.0, 150.0]))
     assert out.shape == (2,) + lf.centre_gt.shape
     single = centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=50.0))
@@ -143,8 +162,16 @@ def test_centre_bad_input(small_scene):
 
 @pytest.mark.parametrize(
     "kwargs",
-    [dict(omega=-1.0), dict(centre_eps=0.0), dict(upsample=3), dict(colour_space="hsv"),
-     dict(wmf_weight="x"), dict(hole_fill="none"), dict(wmf_radius=0), dict(epi_c=float("nan"))],
+    [
+        dict(omega=-1.0),
+        dict(centre_eps=0.0),
+        dict(upsample=3),
+        dict(colour_space="hsv"),
+        dict(wmf_weight="x"),
+        dict(hole_fill="none"),
+        dict(wmf_radius=0),
+        dict(epi_c=float("nan")),
+    ],
 )
 def test_config_validation(kwargs):
     with pytest.raises(ValueError):

@@ -34,7 +34,9 @@ def test_wmf_matches_definition(weight_type):
     rng = np.random.default_rng(3)
     src = rng.integers(0, 50, (23, 31)).astype(np.float32) / 7.0
     guide = rng.uniform(size=(23, 31, 3)).astype(np.float32)
-    out = np.asarray(weighted_median_filter(src, guide, radius=3, sigma=0.2, weight_type=weight_type))
+    out = np.asarray(
+        weighted_median_filter(src, guide, radius=3, sigma=0.2, weight_type=weight_type)
+    )
     ref = _brute(src, guide, 3, 0.2, weight_type)
     np.testing.assert_allclose(out, ref, atol=1e-6)
 
@@ -61,9 +63,13 @@ def test_wmf_agrees_with_opencv_on_real_data(data_dir):
     gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     blurred = cv2.GaussianBlur(gt, (0, 0), 2.0)
     q = np.round((blurred - blurred.min()) / np.ptp(blurred) * 255).astype(np.uint8)
-    ref = cv2.ximgproc.weightedMedianFilter(gray, q, 7, 25.5, cv2.ximgproc.WMF_EXP).astype(np.float32)
+    ref = cv2.ximgproc.weightedMedianFilter(gray, q, 7, 25.5, cv2.ximgproc.WMF_EXP).astype(
+        np.float32
+    )
     out = np.asarray(
-        weighted_median_filter(q.astype(np.float32), gray.astype(np.float32) / 255, radius=7, sigma=0.1)
+        weighted_median_filter(
+            q.astype(np.float32), gray.astype(np.float32) / 255, radius=7, sigma=0.1
+        )
     )
     diff = np.abs(out - ref)
     assert np.mean(diff <= 8) > 0.8, np.mean(diff <= 8)  # measured 0.85
@@ -109,7 +115,10 @@ def test_wmf_jit_and_mask():
         (dict(disparity=np.zeros((4, 5, 1)), guide=np.zeros((4, 5, 3))), "disparity"),
         (dict(disparity=np.zeros((4, 5)), guide=np.zeros((4, 6, 3))), "guide"),
         (dict(disparity=np.zeros((4, 5)), guide=np.zeros((4, 5, 3)), radius=0), "radius"),
-        (dict(disparity=np.zeros((4, 5)), guide=np.zeros((4, 5, 3)), weight_type="gauss"), "weight_type"),
+        (
+            dict(disparity=np.zeros((4, 5)), guide=np.zeros((4, 5, 3)), weight_type="gauss"),
+            "weight_type",
+        ),
         (dict(disparity=np.zeros((4, 5)), guide=np.zeros((4, 5, 3)), mask=np.ones((5, 4))), "mask"),
     ],
 )

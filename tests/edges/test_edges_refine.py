@@ -1,0 +1,94 @@
+"""Refinement stages on small inputs: entropy search (eq 4.5), alignment / visibility
+(eqs 4.3–4.4), outlier rejection (eqs 4.1–4.2) and the trilateral filter (eq 4.6)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from mvedge_jax.edges import EdgeConfig, EdgeSet
+from mvedge_jax.edges._global import reject_outliers, trilateral_filter
+from mvedge_jax.edges._refine import (
+    alignment_cosines,
+    entropy_search,
+    line_entropy,
+    sobel_tensor,
+)
+
+
+def test_entropy_search_moves_towards_the_true_line(make_step_epi, key):
+    # Two-tone EPI of one edge with d = 0.5; the entropy of a line lying on one side is 0.
+    h, W = 9, 48
+    epi = make_step_epi([20.0], [1], 0.5, h, W, sigma=0.0)[..., 0] / 0.6 * 0.9 + 0.05
+    epi = jnp.asarray(epi)
+    # True line on the left side, 1.5 px from the edge: x(u) = 18.5 - (u - 4) 0.5.
+    xt, xb = jnp.array([18.5 + 2.0 + 0.3]), jnp.array([18.5 - 2.0 - 0.3])  # slope a bit off
+    e0 = float(line_entropy(epi, xt, xb, 16)[0])
+    nt, nb = entropy_search(
+        epi, xt, xb, jnp.array([True]), key, iters=30, t=0.95, alpha=0.6, bins=16
+    )
+    e1 = float(line_entropy(epi, nt, nb, 16)[0])
+    assert e1 <= e0
+    # inactive lines do not move
+    st, sb = entropy_search(
+        epi, xt, xb, jnp.array([False]), key, iters=5, t=0.9, alpha=0.5, bins=16
+    )
+    assert float(st[0]) == float(xt[0]) and float(sb[0]) == float(xb[0])
+
+
+def test_alignment_cosines(make_step_epi):
+    epi = jnp.asarray(make_step_epi([20.0], [1], 0.5, 9, 48))
+    T = sobel_tensor(epi)
+    cos = np.asarray(alignment_cosines(T, jnp.array([20.0, 20.0]), jnp.array([0.5, -1.5])))
+    assert cos.shape == (2, 9)
+    assert cos[0].min() > np.cos(np.pi / 13)  # the edge's own slope: aligned on every row
+    assert np.median(cos[1]) < cos[0].min()  # a wrong slope is not
+
+
+def _edges(x, y, d, conf, lab=None, direction=None):
+    n = len(x)
+    e = EdgeSet.empty(n)
+    return EdgeSet(
+        x=jnp.asarray(x, jnp.float32),
+        y=jnp.asarray(y, jnp.float32),
+        disparity=jnp.asarray(d, jnp.float32),
+        confidence=jnp.asarray(conf, jnp.float32),
+        visible=jnp.ones(n, bool),
+        lab=jnp.zeros((n, 3)) if lab is None else jnp.asarray(lab, jnp.float32),
+        direction=jnp.zeros(n, jnp.int32) if direction is None else jnp.asarray(direction),
+        intercepts=e.intercepts,
+        valid=jnp.ones(n, bool),
+        n_dropped=e.n_dropped,
+    )
+
+
+def test_outlier_rejection_counts_same_label_neighbours():
+    # 15x15 image, p = q = 1/3 of it = 5: a cluster of 6 points with label 10 and one isolated
+    # weak point with label 30 (a strong isolated point survives on its confidence alone).
+    xs = [5, 6, 7, 5, 6, 7, 12, 2]
+    ys = [5, 5, 5, 6, 6, 6, 12, 12]
+    labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
+    conf = [0.1] * 6 + [0.1, 10.0]
+    e = _edges(xs, ys, np.zeros(8), conf)
+    cfg = EdgeConfig(outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.2)
+    keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
+    # cluster: 0.1 * 6 / 25 = 0.024 < 0.2; isolated weak 0.1 / 25; strong 10 / 25 = 0.4 >= 0.2.
+    assert keep.tolist() == [False] * 6 + [False, True]
+    cfg2 = EdgeConfig(outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.02)
+    keep2 = np.asarray(reject_outliers(e, labels, (15, 15), cfg2))
+    assert keep2.tolist() == [True] * 6 + [False, True]
+
+
+def test_trilateral_filter_smooths_within_surfaces_only():
+    rng = np.random.default_rng(0)
+    ys, xs = np.mgrid[0:12, 0:12]
+    xs, ys = xs.ravel(), ys.ravel()
+    d = np.where(xs < 6, 0.5, 1.5) + rng.normal(0, 0.02, xs.size)  # two surfaces, noisy
+    lab = np.where((xs < 6)[:, None], [[40.0, 0, 0]], [[70.0, 10, 0]])
+    e = _edges(xs, ys, d, np.ones(xs.size), lab=lab)
+    cfg = EdgeConfig(trilateral_radius=3)
+    f = np.asarray(jax.jit(lambda e: trilateral_filter(e, (12, 12), cfg))(e))
+    truth = np.where(xs < 6, 0.5, 1.5)
+    assert np.abs(f - truth).mean() < 0.5 * np.abs(d - truth).mean()
+    assert np.abs(f - truth).max() < 0.1  # no bleeding across the depth edge

@@ -1,0 +1,123 @@
+"""Cross-hair projection (z-buffer, holes), EPI line rasterisation and angular inpainting."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mvedge_jax.reconstruct import (
+    ReconstructConfig,
+    background_fill,
+    inpaint_epis,
+    photometric_confidence,
+    project_cross_hair,
+    rasterise_lines,
+)
+
+
+def _square_scene(H=32, W=40, d_bg=-0.5, d_fg=2.0):
+    d = np.full((H, W), d_bg, np.float32)
+    d[10:21, 15:26] = d_fg
+    return d
+
+
+def test_project_cross_hair_zbuffer_and_holes():
+    centre = jnp.asarray(_square_scene())
+    ph, vh, pv, vv = jax.jit(project_cross_hair, static_argnums=1)(centre, (5, 5))
+    assert ph.shape == (5, 32, 40) and pv.shape == (5, 32, 40)
+    # The centre view is reproduced exactly.
+    np.testing.assert_array_equal(ph[2], centre)
+    np.testing.assert_array_equal(pv[2], centre)
+    # View (2, 4): dc = 2; the square moves by -4 px, the background by +1 px.
+    p, v = np.asarray(ph[4]), np.asarray(vh[4])
+    np.testing.assert_array_equal(p[15, 11:22], 2.0)  # square, incl. where it covers background
+    assert not v[15, 22:27].any()  # disocclusion to the right of the square
+    assert v[15, 27] and p[15, 27] == -0.5
+    # View (4, 2): dr = 2; the square moves up by 4 px: its bottom rows leave a hole.
+    p, v = np.asarray(pv[4]), np.asarray(vv[4])
+    np.testing.assert_array_equal(p[6:17, 20], 2.0)
+    assert not v[17:22, 20].any()
+
+
+def _epi_scene(L=64, A=9, d_fg=1.3, lo=20, hi=35, seed=0):
+    """One EPI: a textured background (d=0) and a uniformly coloured foreground strip."""
+    rng = np.random.default_rng(seed)
+    tex = rng.uniform(0.2, 0.8, (L + 40, 3)).astype(np.float32)
+    a = np.arange(A)[:, None] - A // 2
+    x = np.arange(L)[None, :]
+    xc = x + a * d_fg  # centre-view position of a foreground point seen at x
+    fg = (xc >= lo) & (xc <= hi)
+    colour = np.where(fg[..., None], np.array([0.9, 0.1, 0.1], np.float32), tex[x + 20])
+    disp = np.where(fg, d_fg, 0.0).astype(np.float32)
+    return colour.astype(np.float32), disp
+
+
+def test_inpainting_fills_disocclusion_with_background():
+    A, L = 9, 64
+    colour, truth = _epi_scene(L, A)
+    centre_row = np.tile(truth[A // 2][None], (3, 1))  # (3, L) map: the row, repeated
+    ph, vh, _, _ = project_cross_hair(jnp.asarray(centre_row), (3, A))
+    proj, valid = ph[:, 1][None], vh[:, 1][None]  # (1, A, L) EPI stack
+    holes = ~np.asarray(valid[0])
+    assert holes.sum() > 20  # disocclusions exist
+    guide = jnp.asarray(colour)[None]
+    zeros = jnp.zeros((1, A, L))
+    # Photometric confidence of the reprojection: the colour each pixel should have, from the
+    # centre row. Sub-pixel rounding puts some foreground values on background pixels.
+    off = jnp.stack([jnp.zeros(A), jnp.arange(A) - A // 2], axis=1)
+    conf = photometric_confidence(
+        proj[0][:, None], off, jnp.asarray(colour[A // 2])[None], jnp.asarray(colour)[:, None], 0.1
+    )[:, 0][None]
+    cfg = ReconstructConfig()
+    plain = np.asarray(inpaint_epis(proj, valid, guide, zeros, zeros, cfg)[0])
+    out = np.asarray(inpaint_epis(proj, valid, guide, zeros, zeros, cfg, conf)[0])
+    err, err_plain = np.abs(out - truth), np.abs(plain - truth)
+    # Measured: hole error max 0.28 / mean 0.12 (foreground label 1.3, background 0); without
+    # the photometric confidence 0.99 / 0.41 (rounded foreground values leak into the holes
+    # along the angular axis, where the background texture is constant).
+    assert err[holes].max() < 0.35, err[holes].max()
+    assert err[holes].mean() < 0.15, err[holes].mean()
+    assert err_plain[holes].mean() > 2 * err[holes].mean()
+    assert np.mean(err > 0.07) < 0.06, np.mean(err > 0.07)
+
+
+def test_epi_lines_carry_labels_the_centre_never_saw():
+    # A region with no reprojected data at all: only an EPI line labels it.
+    A, L = 9, 48
+    proj = jnp.zeros((1, A, L))
+    valid = jnp.zeros((1, A, L), bool).at[0, :, :10].set(True)
+    # Two colour regions: the reprojected one (x < 12) and the unseen one.
+    guide = jnp.where(jnp.arange(L)[None, None, :, None] < 12, 0.2, 0.8) * jnp.ones((1, A, L, 3))
+    lw, ll = rasterise_lines(
+        jnp.asarray([0.0]), jnp.asarray([30.0]), jnp.asarray([0.8]), jnp.asarray([1.0]), (1, A, L)
+    )
+    # The line passes x = 30 - (a - 4) * 0.8 in every angular row.
+    for a in range(A):
+        xs = 30 - (a - 4) * 0.8
+        assert float(lw[0, a, int(np.floor(xs))]) > 0
+        assert float(ll[0, a, int(np.floor(xs))]) == pytest.approx(0.8)
+    out = np.asarray(
+        inpaint_epis(proj, valid, guide, lw, ll, ReconstructConfig(epi_hole_weight=0.0))[0]
+    )
+    assert abs(out[4, 30] - 0.8) < 0.1, out[4, 30]  # measured 0.73
+    assert abs(out[4, 0]) < 0.05
+
+
+def test_rasterise_lines_drops_outside_points():
+    lw, ll = rasterise_lines(
+        jnp.asarray([5.0, 0.0]),
+        jnp.asarray([10.0, 3.0]),
+        jnp.asarray([0.0, 0.0]),
+        jnp.asarray([1.0, 2.0]),
+        (2, 3, 16),
+    )
+    assert float(lw.sum()) == 3 * 2.0  # the first point's EPI index is out of range
+    np.testing.assert_allclose(np.asarray(lw[0, :, 3]), 2.0)
+
+
+def test_background_fill_prefers_the_farther_side():
+    v = jnp.asarray([[2.0, 2.0, 0.0, 0.0, -1.0, -1.0]])
+    ok = jnp.asarray([[True, True, False, False, True, True]])
+    np.testing.assert_allclose(background_fill(v, ok), [[2.0, 2.0, -1.0, -1.0, -1.0, -1.0]])
