@@ -45,7 +45,10 @@ class EdgeConfig(eqx.Module):
             search minimising the colour variance along the EPI line on its less-varying side).
         variance_steps: disparities tried by the variance search.
         variance_radius: the variance search covers ``± variance_radius`` filter spacings
-            (static: it fixes the resampling stencil).
+            (static: it fixes the resampling stencil) ...
+        variance_min_shift: ... but at least enough to move the line by this many pixels in
+            the outermost view (matters for few views, e.g. 3x3, where the bank's spacing is
+            small compared with what the views can resolve).
         cubic: sample EPI lines with cubic (True) or linear interpolation in the variance search.
         variance_on_blurred: run the variance search on the pre-blurred EPIs (default; the
             interpolation along the lines is then less biased) instead of the raw ones.
@@ -93,7 +96,6 @@ class EdgeConfig(eqx.Module):
             (thesis 0.88, 0.15).
         sigma_s, sigma_d, sigma_c: trilateral filter widths in pixels, disparity and LAB / 100
             (thesis 10, 0.1, 0.5).
-        soft_temperature: temperature of `soft_detect` (response units).
 
     Raises:
         ValueError: on construction, for out-of-range values.
@@ -115,6 +117,7 @@ class EdgeConfig(eqx.Module):
     subpixel: str = eqx.field(static=True, default="variance")
     variance_steps: int = eqx.field(static=True, default=9)
     variance_radius: float = eqx.field(static=True, default=1.5)
+    variance_min_shift: float = eqx.field(static=True, default=0.4)
     cubic: bool = eqx.field(static=True, default=True)
     variance_on_blurred: bool = eqx.field(static=True, default=True)
     outliers: bool = eqx.field(static=True, default=True)
@@ -148,7 +151,6 @@ class EdgeConfig(eqx.Module):
     sigma_s: Float[Array, ""] = eqx.field(converter=_f32, default=10.0)
     sigma_d: Float[Array, ""] = eqx.field(converter=_f32, default=0.1)
     sigma_c: Float[Array, ""] = eqx.field(converter=_f32, default=0.5)
-    soft_temperature: Float[Array, ""] = eqx.field(converter=_f32, default=0.02)
 
     def __check_init__(self):
         if not (isinstance(self.n_filters, int) and self.n_filters >= 3):
@@ -194,6 +196,10 @@ class EdgeConfig(eqx.Module):
             raise ValueError(f"alignment_c must be >= 1; got {self.alignment_c}")
         if not (isinstance(self.variance_radius, (int, float)) and self.variance_radius > 0):
             raise ValueError(f"variance_radius must be a float > 0; got {self.variance_radius!r}")
+        if not (isinstance(self.variance_min_shift, (int, float)) and self.variance_min_shift >= 0):
+            raise ValueError(
+                f"variance_min_shift must be a float >= 0; got {self.variance_min_shift!r}"
+            )
         positive = (
             "presmooth_sigma",
             "edge_shift",
@@ -201,7 +207,6 @@ class EdgeConfig(eqx.Module):
             "sigma_s",
             "sigma_d",
             "sigma_c",
-            "soft_temperature",
             "entropy_t",
             "max_colour_std",
         )

@@ -236,7 +236,7 @@ def _direction_lines(views, perm, d_max: float, config: EdgeConfig, key) -> dict
     """All lines of one EPI direction; ``views (n, H, W, 3)``, ``perm`` makes EPIs from them."""
     n_views = views.shape[0]
     spacing = 2.0 * d_max / (config.n_filters - 1)
-    radius = config.variance_radius * spacing
+    radius = max(config.variance_radius * spacing, config.variance_min_shift / (n_views // 2))
     disps, bank = build_bank(config, n_views, d_max)
     raw, blur = _epis(views, perm, config)
     k1, k2 = jax.random.split(key)

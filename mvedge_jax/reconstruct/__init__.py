@@ -6,8 +6,11 @@ from ._crosshair import inpaint_epis as inpaint_epis
 from ._crosshair import photometric_confidence as photometric_confidence
 from ._crosshair import project_cross_hair as project_cross_hair
 from ._crosshair import rasterise_lines as rasterise_lines
-from ._oracle import OracleSurface as OracleSurface, oracle_edges as oracle_edges
-from ._reconstruct import Reconstruction as Reconstruction, reconstruct as reconstruct
+from ._oracle import OracleSurface as OracleSurface
+from ._oracle import oracle_edges as oracle_edges
+from ._photo import photo_cost as photo_cost
+from ._photo import photo_refine as photo_refine
+from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
+from ._reconstruct import reconstruct as reconstruct
 from ._wmf import weighted_median_filter as weighted_median_filter
-from ._photo import photo_cost as photo_cost, photo_refine as photo_refine

@@ -144,10 +144,13 @@ def _check_inputs(edges: EdgeSet, surface, centre_view) -> tuple[int, int]:
     H, W = centre_view.shape[:2]
     N = edges.capacity
     if tuple(surface.offset.shape) != (N, 2):
-        raise ValueError(f"surface.offset must have shape ({N}, 2); got {tuple(surface.offset.shape)}")
+        raise ValueError(
+            f"surface.offset must have shape ({N}, 2); got {tuple(surface.offset.shape)}"
+        )
     if tuple(surface.step_response.shape) != (N,):
         raise ValueError(
-            f"surface.step_response must have shape ({N},); got {tuple(surface.step_response.shape)}"
+            f"surface.step_response must have shape ({N},); "
+            f"got {tuple(surface.step_response.shape)}"
         )
     if tuple(surface.depth_edge_confidence.shape) != (H, W):
         raise ValueError(

@@ -100,7 +100,7 @@ class ReconstructConfig(eqx.Module):
     centre_c: Array = eqx.field(converter=_f32, default=1.0)
     centre_eps: Array = eqx.field(converter=_f32, default=1e-3)
     conf_beta: Array = eqx.field(converter=_f32, default=10.0)
-    wmf_sigma: Array = eqx.field(converter=_f32, default=0.1)
+    wmf_sigma: Array = eqx.field(converter=_f32, default=0.05)
     epi_data_weight: Array = eqx.field(converter=_f32, default=15.0)
     epi_centre_weight: Array = eqx.field(converter=_f32, default=1000.0)
     epi_photo_sigma: Array = eqx.field(converter=_f32, default=0.1)
@@ -122,7 +122,7 @@ class ReconstructConfig(eqx.Module):
     wmf_iterations: int = eqx.field(static=True, default=10)
     refine: bool = eqx.field(static=True, default=True)
     refine_radius: int = eqx.field(static=True, default=3)
-    refine_iterations: int = eqx.field(static=True, default=8)
+    refine_iterations: int = eqx.field(static=True, default=12)
     refine_aggregate: int = eqx.field(static=True, default=2)
     hole_fill: str = eqx.field(static=True, default="solve")
     merge: str = eqx.field(static=True, default="photo")
@@ -132,10 +132,23 @@ class ReconstructConfig(eqx.Module):
     fill_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
 
     def __check_init__(self):
-        nonneg = ("omega", "lambda_e_max", "centre_c", "conf_beta", "epi_data_weight",
-                  "epi_centre_weight", "epi_hole_weight",
-                  "epi_line_scale", "epi_line_floor", "epi_occlusion_tol", "epi_c", "fill_c", "fill_data_weight",
-                  "refine_jump", "refine_margin")
+        nonneg = (
+            "omega",
+            "lambda_e_max",
+            "centre_c",
+            "conf_beta",
+            "epi_data_weight",
+            "epi_centre_weight",
+            "epi_hole_weight",
+            "epi_line_scale",
+            "epi_line_floor",
+            "epi_occlusion_tol",
+            "epi_c",
+            "fill_c",
+            "fill_data_weight",
+            "refine_jump",
+            "refine_margin",
+        )
         positive = ("centre_eps", "wmf_sigma", "epi_eps", "epi_photo_sigma")
         for name in nonneg + positive:
             v = _concrete(getattr(self, name))
@@ -156,7 +169,8 @@ class ReconstructConfig(eqx.Module):
             )
         if self.wmf_weight not in WEIGHT_TYPES:
             raise ValueError(
-                f"ReconstructConfig.wmf_weight must be one of {WEIGHT_TYPES}; got {self.wmf_weight!r}"
+                f"ReconstructConfig.wmf_weight must be one of {WEIGHT_TYPES}; "
+                f"got {self.wmf_weight!r}"
             )
         if (
             int(self.refine_radius) < 1

@@ -17,7 +17,9 @@ def project_cross_hair(
     grid: tuple[int, int],
     *,
     crack_parallax: float = 0.5,
-) -> tuple[Float[Array, "V H W"], Bool[Array, "V H W"], Float[Array, "U H W"], Bool[Array, "U H W"]]:
+) -> tuple[
+    Float[Array, "V H W"], Bool[Array, "V H W"], Float[Array, "U H W"], Bool[Array, "U H W"]
+]:
     """Forward-project the centre disparity into every view of the central cross-hair.
 
     View ``(U // 2, col)`` receives ``forward_project(centre, (0, col - V // 2))`` and view
@@ -196,9 +198,9 @@ def inpaint_epis(
     target = jnp.where(pos, num / jnp.where(pos, lam, 1.0), 0.0)
     # Initial guess: the reprojection where valid, else the background prior.
     x0 = jnp.where(valid, projected, bg)
-    wx, wy = jax.vmap(
-        lambda g: guide_edge_weights(g, scale=config.epi_c, eps=config.epi_eps)
-    )(epi_guide)
+    wx, wy = jax.vmap(lambda g: guide_edge_weights(g, scale=config.epi_c, eps=config.epi_eps))(
+        epi_guide
+    )
     # guide_edge_weights on an (A, L) grid: weight_x along L (A, L-1), weight_y along A (A-1, L).
     return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi_solver).x
 

@@ -56,9 +56,10 @@ def oracle_edges(
 ) -> tuple[EdgeSet, OracleSurface]:
     """Edge points and surface vectors derived from the ground-truth centre disparity.
 
-    Points: pixels whose CIELAB gradient magnitude (Gaussian σ = 1, Sobel) exceeds
-    ``threshold`` (L* units per pixel) and is a local maximum along the gradient direction
-    ``n``. Label: the ground truth at the pixel; the surface vector points to the side (``±n``)
+    Points: pixels whose CIELAB gradient magnitude (colour structure tensor of the Sobel
+    derivatives after a Gaussian blur with σ = 1) exceeds ``threshold`` (CIELAB units per
+    pixel) and is a local maximum along the gradient direction ``n``. Label: the ground truth
+    at the pixel; the surface vector points to the side (``±n``)
     whose ground truth one pixel away is closer to the label (texture edges, with equal
     sides, point along ``+n``).
     ``step_response = tanh(|gt(p + 2n) − gt(p − 2n)| / step_scale)``; the depth-edge
@@ -70,7 +71,7 @@ def oracle_edges(
         centre_view: ``(H, W, 3)`` RGB in [0, 1].
         gt: ``(H, W)`` ground-truth disparity of the centre view.
         grid: ``(U, V)`` of the light field (for the intercepts).
-        threshold: gradient threshold, L* per pixel.
+        threshold: gradient threshold, CIELAB units per pixel.
         capacity: `EdgeSet` capacity (default: the number of points).
         step_scale, confidence_scale: disparity scales of the two tanh normalisations.
         noise: standard deviation of Gaussian noise added to the labels.
@@ -84,8 +85,6 @@ def oracle_edges(
     H, W = gt.shape
     lab = np.asarray(rgb_to_lab(jnp.asarray(img)))
     blur = cv2.GaussianBlur(lab, (0, 0), 1.0)
-    gx = sum(cv2.Sobel(blur[..., c], cv2.CV_32F, 1, 0, ksize=3) ** 2 for c in range(3))
-    gy = sum(cv2.Sobel(blur[..., c], cv2.CV_32F, 0, 1, ksize=3) ** 2 for c in range(3))
     # Colour structure tensor direction: the dominant gradient orientation.
     jxx = sum(cv2.Sobel(blur[..., c], cv2.CV_32F, 1, 0, ksize=3) ** 2 for c in range(3)) / 64
     jyy = sum(cv2.Sobel(blur[..., c], cv2.CV_32F, 0, 1, ksize=3) ** 2 for c in range(3)) / 64
@@ -97,7 +96,6 @@ def oracle_edges(
         )
         / 64
     )
-    del gx, gy
     mag = np.sqrt(np.maximum(0.5 * (jxx + jyy + np.sqrt((jxx - jyy) ** 2 + 4 * jxy**2)), 0))
     theta = 0.5 * np.arctan2(2 * jxy, jxx - jyy)
     nx, ny = np.cos(theta), np.sin(theta)

@@ -129,6 +129,7 @@ def photo_refine(
     Returns:
         ``(H, W)`` refined disparity.
     """
+
     def one(_, d):
         lo, hi = _window_extrema(d, radius)
         band = (hi - lo) > jump

@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
@@ -108,30 +107,34 @@ def merge_reprojections(
     cp = config.crack_parallax
     a, va = forward_project(cross_h[col], off_a, crack_parallax=cp)
     b, vb = forward_project(cross_v[row], off_b, crack_parallax=cp)
+    wa = va.astype(a.dtype)
+    wb = vb.astype(a.dtype)
     if config.merge == "photo":
+        # A view missing from a partial grid (all zero) has no colour to compare with.
+        present = jnp.max(views[row, col]) > 0
         target = views[row, col][None]
-        wa = photometric_confidence(a[None], off_a[None], views[rc, col], target, config.epi_photo_sigma)[0]
-        wb = photometric_confidence(b[None], off_b[None], views[row, cc], target, config.epi_photo_sigma)[0]
-        wa = jnp.where(va, jnp.maximum(wa, 1e-6), 0.0)
-        wb = jnp.where(vb, jnp.maximum(wb, 1e-6), 0.0)
-        conf = jnp.maximum(wa, wb)
-    else:
-        wa = va.astype(a.dtype)
-        wb = vb.astype(a.dtype)
-        conf = jnp.maximum(wa, wb)
+        sigma = config.epi_photo_sigma
+        pa = photometric_confidence(a[None], off_a[None], views[rc, col], target, sigma)[0]
+        pb = photometric_confidence(b[None], off_b[None], views[row, cc], target, sigma)[0]
+        wa = jnp.where(present, wa * jnp.maximum(pa, 1e-6), wa)
+        wb = jnp.where(present, wb * jnp.maximum(pb, 1e-6), wb)
+    conf = jnp.maximum(wa, wb)
     n = wa + wb
     s = wa * jnp.where(va, a, 0.0) + wb * jnp.where(vb, b, 0.0)
     return jnp.where(n > 0, s / jnp.where(n > 0, n, 1.0), 0.0), conf
 
 
-def _fill_view(values, conf, guide, config: ReconstructConfig):
+def _fill_view(values, conf, image, config: ReconstructConfig):
     valid = conf > 0
     filled = background_fill(values, valid)
     if config.hole_fill == "background":
         return filled
     lam = config.fill_data_weight * conf + jnp.where(valid, 0.0, config.epi_hole_weight)
+    guide = colour_guide(image, config.colour_space)
     wx, wy = guide_edge_weights(guide, scale=config.fill_c, eps=config.epi_eps)
-    return solve_poisson(lam, filled, wx, wy, x0=filled, config=config.fill_solver).x
+    solved = solve_poisson(lam, filled, wx, wy, x0=filled, config=config.fill_solver).x
+    # A view missing from a partial grid (all zero) gives no guide: keep the background fill.
+    return jnp.where(jnp.max(image) > 0, solved, filled)
 
 
 def _cross_hair_views(views: Array) -> tuple[Array, Array]:
@@ -171,7 +174,10 @@ def reconstruct(
     """Smooth, view-consistent disparity for every view of a light field (thesis Ch. 6).
 
     1. Centre view: `centre_disparity` (eq 6.1–6.3).
-    2. Sharpening: `weighted_median_filter` guided by the centre view (``config.sharpen``).
+    2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
+       side with the cross-hair views (`photo_refine`, ``config.refine``; not in the thesis:
+       it removes the foreground halos that labels on the wrong side of an occlusion edge
+       leave), then `weighted_median_filter` guided by the centre view (``config.sharpen``).
     3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
     4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
        every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
@@ -184,7 +190,8 @@ def reconstruct(
 
     The centre view's output is the mean of its two inpainted versions (row and column).
     jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept without
-    recompiling. Partial grids: only the cross-hair views are read.
+    recompiling. Partial grids (views missing off the cross-hair are all zero): those views
+    get the plain mean of the reprojections and the background fill.
 
     Args:
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1].
@@ -218,7 +225,9 @@ def reconstruct(
     centre = centre_disparity(edges, surface, centre_view, config)
     sharp = centre
     if config.refine:
-        sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, config.refine_iterations)
+        sharp = _refine(
+            sharp, rc_j, cc_j, views, ch_views, ch_pos, config, config.refine_iterations
+        )
     if config.sharpen:
         sharp = weighted_median_filter(
             sharp,
@@ -244,11 +253,21 @@ def reconstruct(
     ch = photometric_confidence(ph, off_h, centre_view, views[rc], config.epi_photo_sigma)
     cv = photometric_confidence(pv, off_v, centre_view, views[:, cc], config.epi_photo_sigma)
     eh = inpaint_epis(
-        jnp.transpose(ph, (1, 0, 2)), jnp.transpose(vh, (1, 0, 2)), gh, lwh, llh, config,
+        jnp.transpose(ph, (1, 0, 2)),
+        jnp.transpose(vh, (1, 0, 2)),
+        gh,
+        lwh,
+        llh,
+        config,
         jnp.transpose(ch, (1, 0, 2)),
     )
     ev = inpaint_epis(
-        jnp.transpose(pv, (2, 0, 1)), jnp.transpose(vv, (2, 0, 1)), gv, lwv, llv, config,
+        jnp.transpose(pv, (2, 0, 1)),
+        jnp.transpose(vv, (2, 0, 1)),
+        gv,
+        lwv,
+        llv,
+        config,
         jnp.transpose(cv, (2, 0, 1)),
     )
     cross_h = jnp.transpose(eh, (1, 0, 2))  # (V, H, W)
@@ -265,8 +284,7 @@ def reconstruct(
         def one(rc_pair):
             r, c = rc_pair
             vals, conf = merge_reprojections(cross_h, cross_v, views, r, c, config)
-            guide = colour_guide(views[r, c], config.colour_space)
-            return _fill_view(vals, conf, guide, config)
+            return _fill_view(vals, conf, views[r, c], config)
 
         off = lax.map(one, (rows_j, cols_j))
         disparity = disparity.at[rows_j, cols_j].set(off)

@@ -96,9 +96,7 @@ def _block_median(
     return jnp.where(out < big, out, d[r : r + block, r : r + width])
 
 
-@functools.partial(
-    jax.jit, static_argnames=("radius", "weight_type", "iterations", "block_rows")
-)
+@functools.partial(jax.jit, static_argnames=("radius", "weight_type", "iterations", "block_rows"))
 def _wmf(disparity, guide, mask, sigma, *, radius, weight_type, iterations, block_rows):
     H, W = disparity.shape
     r = radius

@@ -23,7 +23,10 @@ def test_photo_cost_is_lowest_at_the_truth(small_scene):
     lf, _, _ = small_scene
     views, offsets = _cross(lf)
     gt = lf.centre_gt
-    costs = [float(jnp.mean(photo_cost(gt + delta, lf.centre_view, views, offsets))) for delta in (-0.3, 0.0, 0.3)]
+    costs = [
+        float(jnp.mean(photo_cost(gt + delta, lf.centre_view, views, offsets)))
+        for delta in (-0.3, 0.0, 0.3)
+    ]
     assert costs[1] < 0.5 * min(costs[0], costs[2]), costs
 
 
@@ -32,7 +35,9 @@ def test_photo_refine_removes_a_foreground_halo(small_scene):
     views, offsets = _cross(lf)
     gt = np.asarray(lf.centre_gt)
     halo = grey_dilation(gt, size=(5, 5))  # foreground fattened by 2 px (edge fattening)
-    f = jax.jit(lambda d: photo_refine(d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4))
+    f = jax.jit(
+        lambda d: photo_refine(d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4)
+    )
     out = np.asarray(f(jnp.asarray(halo)))
     bad_in = np.mean(np.abs(halo - gt) > 0.07)
     bad_out = np.mean(np.abs(out - gt) > 0.07)
