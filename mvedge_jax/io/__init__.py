@@ -1,5 +1,11 @@
 """File formats: HCI 4D, old HCI, view grids, PFM, PNG. The only package that touches files."""
 
+from ._colmap import ColmapCamera as ColmapCamera
+from ._colmap import ColmapImage as ColmapImage
+from ._colmap import ColmapModel as ColmapModel
+from ._colmap import ColmapPoints as ColmapPoints
+from ._colmap import read_colmap_text as read_colmap_text
+from ._colmap import write_colmap_text as write_colmap_text
 from ._grid import read_view_grid as read_view_grid
 from ._hci import read_hci4d as read_hci4d
 from ._hci_old import depth_to_disparity as depth_to_disparity
@@ -22,9 +28,3 @@ from ._pfm import read_pfm as read_pfm
 from ._pfm import write_pfm as write_pfm
 from ._results import OutputWriter as OutputWriter
 from ._results import check_output_dir as check_output_dir
-from ._colmap import ColmapCamera as ColmapCamera
-from ._colmap import ColmapImage as ColmapImage
-from ._colmap import ColmapModel as ColmapModel
-from ._colmap import ColmapPoints as ColmapPoints
-from ._colmap import read_colmap_text as read_colmap_text
-from ._colmap import write_colmap_text as write_colmap_text
