@@ -52,10 +52,16 @@ class EdgeConfig(eqx.Module):
         cubic: sample EPI lines with cubic (True) or linear interpolation in the variance search.
         variance_on_blurred: run the variance search on the pre-blurred EPIs (default; the
             interpolation along the lines is then less biased) instead of the raw ones.
-        outliers: apply the neighbour-count outlier rejection (eqs 4.1–4.2). Off by default:
-            it removes the isolated points of sparsely textured surfaces (HCI antinous' wall),
-            which alone hold those surfaces in the reconstruction (centre MSE×100 175 with it,
-            36 without, on antinous; 5.3 and 5.1 on backgammon).
+        outliers: apply the outlier rejection of eqs 4.1–4.2 (`reject_outliers`). ``None``
+            (default): only when the EPIs have at most ``outlier_auto_views`` views, where a
+            line is supported by so few samples that wrong labels are common (HCI stillLife
+            3x3: MSE×100 191 without, 24.5 with the agreement test). With 9 views it only
+            removes correct points (the count test removes the isolated points of sparsely
+            textured surfaces: HCI antinous 124.5 with it, 8.0 without).
+        outlier_auto_views: the view count up to which ``outliers=None`` rejects outliers.
+        outlier_test: ``"count"`` (eq 4.2: too few neighbours with the same disparity) or
+            ``"agreement"`` (default: too small a fraction of the neighbours agree; see
+            `reject_outliers`).
         outlier_window_frac: p, q = this fraction of the width / height (thesis 1/15).
         outlier_label_tol: lines whose filter labels differ by at most this count as "same
             disparity" in eq 4.1.
@@ -93,6 +99,8 @@ class EdgeConfig(eqx.Module):
         outlier_tau: τ of eq 4.2. The thesis's 8e-5 belongs to its confidence scale; ours
             (response x 3x3 std in LAB / 100 units) is smaller, and 1e-5 was the most accurate
             setting that keeps most points (HCI backgammon and antinous).
+        outlier_min_agreement: fraction of a point's window neighbours (same direction) that
+            must share its disparity label with ``outlier_test = "agreement"``.
         multiscale_lambda_frac: a coarse line is dropped when both its intercepts are within
             this fraction of the EPI height of a fine line's (4.1.4; thesis λ = 0.2h).
         tau_f: gradient-alignment angle of eq 4.3, radians (thesis π/13).
@@ -125,7 +133,9 @@ class EdgeConfig(eqx.Module):
     variance_min_shift: float = eqx.field(static=True, default=0.4)
     cubic: bool = eqx.field(static=True, default=True)
     variance_on_blurred: bool = eqx.field(static=True, default=True)
-    outliers: bool = eqx.field(static=True, default=False)
+    outliers: bool | None = eqx.field(static=True, default=None)
+    outlier_auto_views: int = eqx.field(static=True, default=5)
+    outlier_test: str = eqx.field(static=True, default="agreement")
     outlier_window_frac: float = eqx.field(static=True, default=1.0 / 15.0)
     outlier_label_tol: int = eqx.field(static=True, default=1)
     multiscale: bool = eqx.field(static=True, default=False)
@@ -148,6 +158,7 @@ class EdgeConfig(eqx.Module):
     variance_offset: Float[Array, ""] = eqx.field(converter=_f32, default=1.5)
     max_colour_std: Float[Array, ""] = eqx.field(converter=_f32, default=float("inf"))
     outlier_tau: Float[Array, ""] = eqx.field(converter=_f32, default=1e-5)
+    outlier_min_agreement: Float[Array, ""] = eqx.field(converter=_f32, default=0.15)
     multiscale_lambda_frac: Float[Array, ""] = eqx.field(converter=_f32, default=0.2)
     tau_f: Float[Array, ""] = eqx.field(converter=_f32, default=math.pi / 13)
     tau_v: Float[Array, ""] = eqx.field(converter=_f32, default=math.pi / 10)
@@ -169,6 +180,10 @@ class EdgeConfig(eqx.Module):
             )
         if self.directions not in _DIRECTIONS:
             raise ValueError(f"directions must be one of {_DIRECTIONS}; got {self.directions!r}")
+        if self.outlier_test not in ("count", "agreement"):
+            raise ValueError(
+                f"outlier_test must be 'count' or 'agreement'; got {self.outlier_test!r}"
+            )
         if self.subpixel not in _SUBPIXEL:
             raise ValueError(f"subpixel must be one of {_SUBPIXEL}; got {self.subpixel!r}")
         if self.line_capacity is not None and not (

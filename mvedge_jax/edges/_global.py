@@ -35,7 +35,11 @@ def reject_outliers(
 
     ``A(l_i)`` = lines of the same direction within a ``p x q`` window (``p, q`` =
     ``outlier_window_frac`` of the width / height) whose filter label is within
-    ``outlier_label_tol`` of ``l_i``'s; ``l_i`` is discarded when ``c_i |A(l_i)| / (p q) < τ``.
+    ``outlier_label_tol`` of ``l_i``'s. With ``config.outlier_test = "count"`` (the thesis)
+    ``l_i`` is discarded when ``c_i |A(l_i)| / (p q) < τ``; with ``"agreement"`` when
+    ``|A(l_i)| / |N(l_i)| < outlier_min_agreement``, ``N(l_i)`` all lines of the direction in
+    the window: a point is an outlier when its neighbours disagree with it, not when it has
+    few neighbours (isolated points on sparsely textured surfaces are kept).
 
     Args:
         edges: the edge set (centre-view positions).
@@ -61,6 +65,7 @@ def reject_outliers(
         sel = edges.valid & (edges.direction == direction)
         grid = jnp.zeros((n, H, W), jnp.float32).at[lab, yi, xi].add(sel.astype(jnp.float32))
         counts = _box_sum(grid, q // 2, p // 2)  # (n, H, W)
+        total = jnp.sum(counts, axis=0)[yi, xi]
         tol = config.outlier_label_tol
         if tol:
             cs = jnp.pad(jnp.cumsum(counts, axis=0), ((1, 0), (0, 0), (0, 0)))
@@ -68,7 +73,10 @@ def reject_outliers(
             lo = jnp.clip(jnp.arange(n) - tol, 0, n)
             counts = cs[hi] - cs[lo]
         a = counts[lab, yi, xi]
-        ok = edges.confidence * a / (p * q) >= config.outlier_tau
+        if config.outlier_test == "agreement":
+            ok = a >= config.outlier_min_agreement * total
+        else:
+            ok = edges.confidence * a / (p * q) >= config.outlier_tau
         keep = keep | (sel & ok)
     return keep
 

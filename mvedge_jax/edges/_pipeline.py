@@ -330,7 +330,8 @@ def _detect_arrays(row_views, col_views, config: EdgeConfig, d_max: float, key) 
     for es, lab in sets[1:]:
         edges = concatenate(edges, es)
         labels = jnp.concatenate([labels, lab])
-    if config.outliers:
+    few_views = min(row_views.shape[0], col_views.shape[0]) <= config.outlier_auto_views
+    if config.outliers or (config.outliers is None and few_views):
         keep = reject_outliers(edges, labels, (H, W), config)
         edges = eqx.tree_at(lambda e: e.valid, edges, edges.valid & keep)
     if config.trilateral:

@@ -71,13 +71,32 @@ def test_outlier_rejection_counts_same_label_neighbours():
     labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
     conf = [0.1] * 6 + [0.1, 10.0]
     e = _edges(xs, ys, np.zeros(8), conf)
-    cfg = EdgeConfig(outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.2)
+    cfg = EdgeConfig(
+        outlier_test="count", outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.2
+    )
     keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
     # cluster: 0.1 * 6 / 25 = 0.024 < 0.2; isolated weak 0.1 / 25; strong 10 / 25 = 0.4 >= 0.2.
     assert keep.tolist() == [False] * 6 + [False, True]
-    cfg2 = EdgeConfig(outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.02)
+    cfg2 = EdgeConfig(
+        outlier_test="count", outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.02
+    )
     keep2 = np.asarray(reject_outliers(e, labels, (15, 15), cfg2))
     assert keep2.tolist() == [True] * 6 + [False, True]
+
+
+def test_outlier_agreement_test_keeps_isolated_points_and_drops_disagreeing_ones():
+    # A cluster of 6 points with label 10, one point inside it with label 30 (disagrees with
+    # its neighbours), and an isolated point with label 40 far away (no neighbours at all).
+    xs = [5, 6, 7, 5, 6, 7, 6, 13]
+    ys = [5, 5, 5, 6, 6, 6, 7, 13]
+    labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
+    e = _edges(xs, ys, np.zeros(8), [0.1] * 8)
+    cfg = EdgeConfig(
+        outlier_test="agreement", outlier_window_frac=1 / 3, outlier_min_agreement=0.3
+    )
+    keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
+    # cluster: 6 of 7 neighbours agree; label 30: 1 of 7; isolated: 1 of 1.
+    assert keep.tolist() == [True] * 6 + [False, True]
 
 
 def test_trilateral_filter_smooths_within_surfaces_only():
