@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mvedge_jax.edges import EdgeConfig, EdgeSet
+from mvedge_jax.edges import EdgeConfig, EdgeSet, detect_edges
 from mvedge_jax.edges._global import reject_outliers, trilateral_filter
 from mvedge_jax.edges._refine import (
     alignment_cosines,
@@ -111,3 +111,14 @@ def test_trilateral_filter_smooths_within_surfaces_only():
     truth = np.where(xs < 6, 0.5, 1.5)
     assert np.abs(f - truth).mean() < 0.5 * np.abs(d - truth).mean()
     assert np.abs(f - truth).max() < 0.1  # no bleeding across the depth edge
+
+
+def test_outlier_rejection_is_automatic_for_few_views():
+    # outliers=None rejects outliers only when the EPIs have <= outlier_auto_views views.
+    from edges_helpers import plane_light_field
+
+    for U, expect_on in ((3, True), (9, False)):
+        plane = plane_light_field(0.637, U=U, H=16, W=24, seed=2)
+        cfg = EdgeConfig(outlier_min_agreement=1.01)  # would reject every point
+        n = int(np.asarray(detect_edges(plane, cfg).valid).sum())
+        assert (n == 0) == expect_on, (U, n)
