@@ -42,7 +42,13 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Int
 from ._config import RenderConfig
 from ._splat import check_points, check_shape, label_kernel_1d, weight_kernel
 
-_TINY = 1e-20  # below this total opacity a pixel has no label (its weight is ~0 anyway)
+
+def _tiny(dtype) -> float:
+    """Below this total weight a pixel has no label (its weight is ~0 anyway). ``eps²`` of the
+    dtype: small enough to be negligible, large enough that the gradient of ``num / den``
+    (``∝ 1 / den²``) stays finite (1e-20 overflowed in float32)."""
+    return float(jnp.finfo(dtype).eps) ** 2
+
 
 _DEFAULT_RENDER = RenderConfig()
 
@@ -290,6 +296,6 @@ def render(
 
     num, alpha, lam = assemble(num), assemble(alpha), assemble(lam)
     den = alpha if config.label_mix == "opacity" else lam
-    has = den > _TINY
+    has = den > _tiny(den.dtype)
     lab = jnp.where(has, num / jnp.where(has, den, 1.0), 0.0)
     return RenderResult(label=lab, weight=lam, alpha=alpha, overflow=overflow)
