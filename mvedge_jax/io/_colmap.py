@@ -34,6 +34,17 @@ CAMERA_MODELS: dict[str, int] = {
 }
 
 
+# Camera models whose parameters start with one focal length ``f, cx, cy, ...``; the others
+# start with ``fx, fy, cx, cy, ...``.
+_ONE_FOCAL_MODELS = (
+    "SIMPLE_PINHOLE",
+    "SIMPLE_RADIAL",
+    "RADIAL",
+    "SIMPLE_RADIAL_FISHEYE",
+    "RADIAL_FISHEYE",
+)
+
+
 @dataclasses.dataclass(frozen=True)
 class ColmapCamera:
     """One camera (intrinsics).
@@ -57,13 +68,7 @@ class ColmapCamera:
     def focal(self) -> tuple[float, float]:
         """``(fx, fy)`` in pixels."""
         p = self.params
-        if self.model in (
-            "SIMPLE_PINHOLE",
-            "SIMPLE_RADIAL",
-            "RADIAL",
-            "SIMPLE_RADIAL_FISHEYE",
-            "RADIAL_FISHEYE",
-        ):
+        if self.model in _ONE_FOCAL_MODELS:
             return float(p[0]), float(p[0])
         return float(p[0]), float(p[1])
 
@@ -71,13 +76,7 @@ class ColmapCamera:
     def principal_point(self) -> tuple[float, float]:
         """``(cx, cy)`` in COLMAP pixel coordinates."""
         p = self.params
-        if self.model in (
-            "SIMPLE_PINHOLE",
-            "SIMPLE_RADIAL",
-            "RADIAL",
-            "SIMPLE_RADIAL_FISHEYE",
-            "RADIAL_FISHEYE",
-        ):
+        if self.model in _ONE_FOCAL_MODELS:
             return float(p[1]), float(p[2])
         return float(p[2]), float(p[3])
 
