@@ -12,5 +12,7 @@ from ._photo import photo_cost as photo_cost
 from ._photo import photo_refine as photo_refine
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
+from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
+from ._reconstruct import sharpen as sharpen
 from ._wmf import weighted_median_filter as weighted_median_filter

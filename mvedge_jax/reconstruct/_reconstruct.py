@@ -1,4 +1,5 @@
-"""`reconstruct`: the smooth 4D reconstruction end to end (thesis Ch. 6)."""
+"""`reconstruct`: the smooth 4D reconstruction end to end (thesis Ch. 6); `sharpen` and
+`propagate`: its second half (a centre-view map → sharpened → every view)."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 class Reconstruction(eqx.Module):
-    """Output of `reconstruct`.
+    """Output of `reconstruct` (and `propagate`).
 
     Attributes:
         disparity: ``(U, V, H, W)`` float32 disparity of every view (pixels per view step).
@@ -164,81 +165,91 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
     )
 
 
-@eqx.filter_jit
-def reconstruct(
-    views: Float[ArrayLike, "U V H W 3"],
-    edges: EdgeSet,
-    surface: SurfaceResult,
-    config: ReconstructConfig = ReconstructConfig(),
-) -> Reconstruction:
-    """Smooth, view-consistent disparity for every view of a light field (thesis Ch. 6).
-
-    1. Centre view: `centre_disparity` (eq 6.1–6.3).
-    2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
-       side with the cross-hair views (`photo_refine`, ``config.refine``; not in the thesis:
-       it removes the foreground halos that labels on the wrong side of an occlusion edge
-       leave), then `weighted_median_filter` guided by the centre view (``config.sharpen``).
-    3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
-    4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
-       every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
-       ``epi_data_weight`` on reprojected pixels, ``λ_e`` on the rasterised EPI lines of all
-       edge points (including points not visible in the centre view), smoothness
-       ``epi_c / (|∇I_EPI| + epi_eps)``; one batched `solve_poisson` per direction.
-    5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
-       vertical cross-hair views (weighted by their photometric confidence with
-       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
-
-    The centre view's output is the mean of its two inpainted versions (row and column).
-    jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept without
-    recompiling. Partial grids (views missing off the cross-hair are all zero): those views
-    get the plain mean of the reprojections and the background fill.
-
-    Args:
-        views: ``(U, V, H, W, 3)`` float RGB in [0, 1].
-        edges: `EdgeSet` (capacity ``N``).
-        surface: `SurfaceResult` (``offset (N, 2)``, ``step_response (N,)``,
-            ``depth_edge_confidence (H, W)``).
-        config: `ReconstructConfig`.
-
-    Returns:
-        `Reconstruction`.
-
-    Raises:
-        ValueError: on inconsistent shapes (quoted).
-
-    References:
-        Thesis Sec. 6.1 (eqs 6.1–6.8); SPEC §4.
-    """
-    views = jnp.asarray(views, jnp.float32)
+def _check_views(views) -> tuple[int, int, int, int]:
     if views.ndim != 5 or views.shape[-1] != 3:
         raise ValueError(f"views must have shape (U, V, H, W, 3); got {tuple(views.shape)}")
     U, V, H, W, _ = views.shape
     if U < 3 or V < 3:
         raise ValueError(f"the light field needs at least 3x3 views; got {U}x{V}")
+    return U, V, H, W
+
+
+def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
+    """Step 2 of `reconstruct` (traced inline; see `sharpen`)."""
+    U, V = views.shape[:2]
     rc, cc = U // 2, V // 2
-    centre_view = views[rc, cc]
-    _check_inputs(edges, surface, centre_view)
-
-    ch_views, ch_pos = _cross_hair_views(views)
-    rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
-
-    centre = centre_disparity(edges, surface, centre_view, config)
     sharp = centre
     if config.refine:
+        ch_views, ch_pos = _cross_hair_views(views)
+        rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
         sharp = _refine(
             sharp, rc_j, cc_j, views, ch_views, ch_pos, config, config.refine_iterations
         )
     if config.sharpen:
         sharp = weighted_median_filter(
             sharp,
-            centre_view,
+            views[rc, cc],
             radius=config.wmf_radius,
             sigma=config.wmf_sigma,
             weight_type=config.wmf_weight,
             iterations=config.wmf_iterations,
         )
+    return sharp
 
-    ph, vh, pv, vv = project_cross_hair(sharp, (U, V), crack_parallax=config.crack_parallax)
+
+@eqx.filter_jit
+def sharpen(
+    views: Float[ArrayLike, "U V H W 3"],
+    centre_disparity: Float[ArrayLike, "H W"],
+    config: ReconstructConfig = ReconstructConfig(),
+) -> Float[Array, "H W"]:
+    """Sharpen a centre-view disparity map at depth discontinuities (step 2 of `reconstruct`).
+
+    With ``config.refine``: pixels next to depth discontinuities are snapped to the
+    photo-consistent side with the cross-hair views (`photo_refine`; not in the thesis: it
+    removes the foreground halos that labels on the wrong side of an occlusion edge leave).
+    With ``config.sharpen``: `weighted_median_filter` guided by the centre view (thesis
+    Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result).
+    Both off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
+
+    Args:
+        views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
+        centre_disparity: ``(H, W)`` float disparity of the centre view ``(U//2, V//2)``,
+            pixels per view step.
+        config: `ReconstructConfig` (``refine*``, ``sharpen``, ``wmf_*``).
+
+    Returns:
+        ``(H, W)`` float32 sharpened disparity.
+
+    Raises:
+        ValueError: on inconsistent shapes (quoted).
+
+    References:
+        Thesis Sec. 6.1 (weighted median sharpening), Sec. 7.2.1 (WMF post-processing).
+    """
+    views = jnp.asarray(views, jnp.float32)
+    U, V, H, W = _check_views(views)
+    centre = jnp.asarray(centre_disparity, jnp.float32)
+    if centre.shape != (H, W):
+        raise ValueError(
+            f"centre_disparity must have shape {(H, W)} (the views' H, W); "
+            f"got {tuple(centre.shape)}"
+        )
+    return _sharpen(views, centre, config)
+
+
+def _propagate(
+    views: Array,
+    centre: Array,
+    edges: EdgeSet,
+    surface: SurfaceResult,
+    config: ReconstructConfig,
+) -> tuple[Array, Array, Array]:
+    """Steps 3–5 of `reconstruct` (traced inline; see `propagate`)."""
+    U, V, H, W, _ = views.shape
+    rc, cc = U // 2, V // 2
+    centre_view = views[rc, cc]
+    ph, vh, pv, vv = project_cross_hair(centre, (U, V), crack_parallax=config.crack_parallax)
 
     qx, qy, lw = edge_lines(edges, surface.offset, surface.step_response, config)
     d = edges.disparity
@@ -288,6 +299,127 @@ def reconstruct(
 
         off = lax.map(one, (rows_j, cols_j))
         disparity = disparity.at[rows_j, cols_j].set(off)
+    return disparity, cross_h, cross_v
+
+
+@eqx.filter_jit
+def propagate(
+    views: Float[ArrayLike, "U V H W 3"],
+    centre_disparity: Float[ArrayLike, "H W"],
+    edges: EdgeSet,
+    surface: SurfaceResult,
+    config: ReconstructConfig = ReconstructConfig(),
+) -> Reconstruction:
+    """Spread a centre-view disparity map to every view (steps 3–5 of `reconstruct`).
+
+    Everything `reconstruct` does after the sharpened centre map, for any centre map (e.g.
+    the Ch. 7 optimised one):
+
+    1. Forward projection of ``centre_disparity`` into every view of the central cross-hair
+       (z-buffer: the larger disparity, nearer, wins; holes stay holes).
+    2. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
+       every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
+       ``epi_data_weight`` on reprojected pixels (times their photometric confidence),
+       ``λ_e`` on the rasterised EPI lines of all edge points (including points not visible
+       in the centre view), smoothness ``epi_c / (|∇I_EPI| + epi_eps)``; one batched
+       `solve_poisson` per direction.
+    3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
+       vertical cross-hair views (weighted by their photometric confidence with
+       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
+
+    The centre view's output is the mean of its two inpainted versions (row and column), so
+    it is not ``centre_disparity`` itself. Fed the ``centre_sharp`` of a `reconstruct` call
+    with the same inputs and config, it returns the same disparity. jit-compiled
+    (`equinox.filter_jit`).
+
+    Args:
+        views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
+        centre_disparity: ``(H, W)`` float disparity of the centre view ``(U//2, V//2)``,
+            pixels per view step (SPEC §0 sign: larger = nearer).
+        edges: `EdgeSet` (capacity ``N``) whose EPI lines constrain the inpainting.
+        surface: `SurfaceResult` of ``edges`` (``offset (N, 2)``, ``step_response (N,)``).
+        config: `ReconstructConfig` (the centre-view fields are unused).
+
+    Returns:
+        `Reconstruction` with ``disparity (U, V, H, W)``, the inpainted ``cross_h (V, H, W)``
+        and ``cross_v (U, H, W)``; ``centre`` and ``centre_sharp`` are ``centre_disparity``.
+
+    Raises:
+        ValueError: on inconsistent shapes (quoted).
+
+    References:
+        Thesis Sec. 6.1, eqs 6.4–6.8 (forward projection, angular EPI inpainting, off-cross-hair
+        views); SPEC §4 steps 3–6.
+    """
+    views = jnp.asarray(views, jnp.float32)
+    U, V, H, W = _check_views(views)
+    centre = jnp.asarray(centre_disparity, jnp.float32)
+    if centre.shape != (H, W):
+        raise ValueError(
+            f"centre_disparity must have shape {(H, W)} (the views' H, W); "
+            f"got {tuple(centre.shape)}"
+        )
+    _check_inputs(edges, surface, views[U // 2, V // 2])
+    disparity, cross_h, cross_v = _propagate(views, centre, edges, surface, config)
+    return Reconstruction(
+        disparity=disparity, centre=centre, centre_sharp=centre, cross_h=cross_h, cross_v=cross_v
+    )
+
+
+@eqx.filter_jit
+def reconstruct(
+    views: Float[ArrayLike, "U V H W 3"],
+    edges: EdgeSet,
+    surface: SurfaceResult,
+    config: ReconstructConfig = ReconstructConfig(),
+) -> Reconstruction:
+    """Smooth, view-consistent disparity for every view of a light field (thesis Ch. 6).
+
+    1. Centre view: `centre_disparity` (eq 6.1–6.3).
+    2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
+       side with the cross-hair views (`photo_refine`, ``config.refine``; not in the thesis:
+       it removes the foreground halos that labels on the wrong side of an occlusion edge
+       leave), then `weighted_median_filter` guided by the centre view (``config.sharpen``).
+    3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
+    4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
+       every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
+       ``epi_data_weight`` on reprojected pixels, ``λ_e`` on the rasterised EPI lines of all
+       edge points (including points not visible in the centre view), smoothness
+       ``epi_c / (|∇I_EPI| + epi_eps)``; one batched `solve_poisson` per direction.
+    5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
+       vertical cross-hair views (weighted by their photometric confidence with
+       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
+
+    Step 2 is `sharpen` and steps 3–5 are `propagate` (each callable on its own with any
+    centre map). The centre view's output is the mean of its two inpainted versions (row and
+    column). jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept
+    without recompiling. Partial grids (views missing off the cross-hair are all zero): those
+    views get the plain mean of the reprojections and the background fill.
+
+    Args:
+        views: ``(U, V, H, W, 3)`` float RGB in [0, 1].
+        edges: `EdgeSet` (capacity ``N``).
+        surface: `SurfaceResult` (``offset (N, 2)``, ``step_response (N,)``,
+            ``depth_edge_confidence (H, W)``).
+        config: `ReconstructConfig`.
+
+    Returns:
+        `Reconstruction`.
+
+    Raises:
+        ValueError: on inconsistent shapes (quoted).
+
+    References:
+        Thesis Sec. 6.1 (eqs 6.1–6.8); SPEC §4.
+    """
+    views = jnp.asarray(views, jnp.float32)
+    U, V, H, W = _check_views(views)
+    centre_view = views[U // 2, V // 2]
+    _check_inputs(edges, surface, centre_view)
+
+    centre = centre_disparity(edges, surface, centre_view, config)
+    sharp = _sharpen(views, centre, config)
+    disparity, cross_h, cross_v = _propagate(views, sharp, edges, surface, config)
     return Reconstruction(
         disparity=disparity, centre=centre, centre_sharp=sharp, cross_h=cross_h, cross_v=cross_v
     )
