@@ -117,11 +117,14 @@ def test_nan_views_are_rejected():
 
 
 def test_backgammon_accuracy(data_dir):
-    """Regression bound on a real GT scene (thesis Ch. 6 pipeline, centre view)."""
+    """Regression bound on a real GT scene (thesis Ch. 6 pipeline, centre view).
+
+    Measured 2026-11-21: MSE×100 1.43, BadPix(0.07) 1.87 (issue targets 2.0 and 12).
+    """
     lf = load_light_field(data_dir / "hci4d" / "stratified" / "backgammon")
     res = estimate_disparity(lf)
     rc, cc = lf.centre_index
     m = depth_metrics(np.asarray(res.disparity[rc, cc]), np.asarray(lf.centre_gt))
     assert res.disparity.shape == (9, 9, 512, 512)
-    assert m["badpix_0.07"] < 12.0, m
-    assert m["mse_x100"] < 6.0, m
+    assert m["badpix_0.07"] < 3.0, m
+    assert m["mse_x100"] < 2.0, m
