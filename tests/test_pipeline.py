@@ -128,3 +128,15 @@ def test_backgammon_accuracy(data_dir):
     assert res.disparity.shape == (9, 9, 512, 512)
     assert m["badpix_0.07"] < 3.0, m
     assert m["mse_x100"] < 2.0, m
+
+
+def test_antinous_accuracy(data_dir):
+    """Regression bound on the sparsely textured GT scene (its wall has few edge points; an
+    over-eager outlier test once raised MSE×100 to 124). Measured 2026-11-21: 7.96 / 16.3%
+    (issue targets 10 and 18%)."""
+    lf = load_light_field(data_dir / "hci4d" / "additional" / "antinous")
+    res = estimate_disparity(lf)
+    rc, cc = lf.centre_index
+    m = depth_metrics(np.asarray(res.disparity[rc, cc]), np.asarray(lf.centre_gt))
+    assert m["badpix_0.07"] < 18.0, m
+    assert m["mse_x100"] < 10.0, m
