@@ -281,32 +281,6 @@ class EndToEndScene(eqx.Module):
     d_max: float = eqx.field(static=True, default=1.0)
 
 
-@jax.custom_vjp
-def _finite_cotangent(x: Array) -> Array:
-    """Identity whose backward pass replaces non-finite cotangents by 0.
-
-    Guards the per-point labels and weights against the render's float32 division
-    ``S^Z = num / λ^Z``: for ``λ^Z`` in about ``(1e-20, 5e-20)`` (super-Gaussian tails,
-    above the render's emptiness threshold ``_TINY = 1e-20``) the derivative
-    ``-num / (λ^Z)²`` overflows to ``inf`` and ``inf · 0`` makes that point's whole
-    cotangent NaN (~5 % of the points of a 128² HCI crop). Those points lose their gradient
-    for that step; every other point is exact. A no-op in float64 and whenever the
-    cotangents are finite.
-    """
-    return x
-
-
-def _finite_fwd(x):
-    return x, None
-
-
-def _finite_bwd(_, g):
-    return (jnp.where(jnp.isfinite(g), g, 0.0),)
-
-
-_finite_cotangent.defvjp(_finite_fwd, _finite_bwd)
-
-
 def _check_inputs(views_row, views_col, points, centre):
     if views_row.ndim != 4 or views_row.shape[-1] != 3 or views_row.shape[0] < 3:
         raise ValueError(
@@ -484,9 +458,7 @@ def end_to_end_prediction(
     )
     v = hparams.values()
     Q = v["q_scale"].astype(dt) * image_gradient_magnitude(centre)
-    params = DiffParams(
-        position=points, label=_finite_cotangent(label), R=_finite_cotangent(R), Q=Q
-    )
+    params = DiffParams(position=points, label=label, R=R, Q=Q)
     model = eqx.tree_at(
         lambda c: (c.label_weight, c.smoothness, c.q_scale),
         config.model,
