@@ -6,6 +6,7 @@ from ._crosshair import inpaint_epis as inpaint_epis
 from ._crosshair import photometric_confidence as photometric_confidence
 from ._crosshair import project_cross_hair as project_cross_hair
 from ._crosshair import rasterise_lines as rasterise_lines
+from ._matte import boundary_matte as boundary_matte
 from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges
 from ._photo import photo_cost as photo_cost

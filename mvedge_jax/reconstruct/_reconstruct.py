@@ -23,6 +23,7 @@ from ._crosshair import (
     project_cross_hair,
     rasterise_lines,
 )
+from ._matte import boundary_matte
 from ._photo import photo_refine
 from ._wmf import weighted_median_filter
 
@@ -165,6 +166,19 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
     )
 
 
+def _matte(d: Array, image: Array, config: ReconstructConfig) -> Array:
+    """`boundary_matte` of one view's map with the config's settings."""
+    return boundary_matte(
+        d,
+        colour_guide(image, config.colour_space),
+        radius=config.matte_radius,
+        jump=config.matte_jump,
+        spatial_sigma=config.matte_sigma,
+        impure_weight=config.matte_impure_weight,
+        min_separation=config.matte_min_separation,
+    )
+
+
 def _check_views(views) -> tuple[int, int, int, int]:
     if views.ndim != 5 or views.shape[-1] != 3:
         raise ValueError(f"views must have shape (U, V, H, W, 3); got {tuple(views.shape)}")
@@ -185,6 +199,8 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         sharp = _refine(
             sharp, rc_j, cc_j, views, ch_views, ch_pos, config, config.refine_iterations
         )
+    if config.matte:
+        sharp = _matte(sharp, views[rc, cc], config)
     if config.sharpen:
         sharp = weighted_median_filter(
             sharp,
@@ -208,15 +224,17 @@ def sharpen(
     With ``config.refine``: pixels next to depth discontinuities are snapped to the
     photo-consistent side with the cross-hair views (`photo_refine`; not in the thesis: it
     removes the foreground halos that labels on the wrong side of an occlusion edge leave).
-    With ``config.sharpen``: `weighted_median_filter` guided by the centre view (thesis
+    With ``config.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
+    its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
+    ``config.sharpen``: `weighted_median_filter` guided by the centre view (thesis
     Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result).
-    Both off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
+    All off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
 
     Args:
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
         centre_disparity: ``(H, W)`` float disparity of the centre view ``(U//2, V//2)``,
             pixels per view step.
-        config: `ReconstructConfig` (``refine*``, ``sharpen``, ``wmf_*``).
+        config: `ReconstructConfig` (``refine*``, ``matte*``, ``sharpen``, ``wmf_*``).
 
     Returns:
         ``(H, W)`` float32 sharpened disparity.
@@ -245,7 +263,7 @@ def _propagate(
     surface: SurfaceResult,
     config: ReconstructConfig,
 ) -> tuple[Array, Array, Array]:
-    """Steps 3–5 of `reconstruct` (traced inline; see `propagate`)."""
+    """Steps 3–6 of `reconstruct` (traced inline; see `propagate`)."""
     U, V, H, W, _ = views.shape
     rc, cc = U // 2, V // 2
     centre_view = views[rc, cc]
@@ -299,6 +317,17 @@ def _propagate(
 
         off = lax.map(one, (rows_j, cols_j))
         disparity = disparity.at[rows_j, cols_j].set(off)
+    if config.matte_views:
+        # Every view but the centre (whose map was sharpened before the projection).
+        others = np.nonzero((np.arange(U)[:, None] != rc) | (np.arange(V)[None, :] != cc))
+        r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
+        matted = lax.map(
+            lambda rc_pair: _matte(
+                disparity[rc_pair[0], rc_pair[1]], views[rc_pair[0], rc_pair[1]], config
+            ),
+            (r_j, c_j),
+        )
+        disparity = disparity.at[r_j, c_j].set(matted)
     return disparity, cross_h, cross_v
 
 
@@ -310,7 +339,7 @@ def propagate(
     surface: SurfaceResult,
     config: ReconstructConfig = ReconstructConfig(),
 ) -> Reconstruction:
-    """Spread a centre-view disparity map to every view (steps 3–5 of `reconstruct`).
+    """Spread a centre-view disparity map to every view (steps 3–6 of `reconstruct`).
 
     Everything `reconstruct` does after the sharpened centre map, for any centre map (e.g.
     the Ch. 7 optimised one):
@@ -326,6 +355,8 @@ def propagate(
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
+    4. With ``config.matte_views``: `boundary_matte` of every view but the centre (reprojected
+       boundaries are only pixel-accurate).
 
     The centre view's output is the mean of its two inpainted versions (row and column), so
     it is not ``centre_disparity`` itself. Fed the ``centre_sharp`` of a `reconstruct` call
@@ -379,7 +410,8 @@ def reconstruct(
     2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
        side with the cross-hair views (`photo_refine`, ``config.refine``; not in the thesis:
        it removes the foreground halos that labels on the wrong side of an occlusion edge
-       leave), then `weighted_median_filter` guided by the centre view (``config.sharpen``).
+       leave), `boundary_matte` (``config.matte``), then `weighted_median_filter` guided by
+       the centre view (``config.sharpen``).
     3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
     4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
        every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
@@ -389,8 +421,9 @@ def reconstruct(
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
+    6. With ``config.matte_views``: `boundary_matte` of every view but the centre.
 
-    Step 2 is `sharpen` and steps 3–5 are `propagate` (each callable on its own with any
+    Step 2 is `sharpen` and steps 3–6 are `propagate` (each callable on its own with any
     centre map). The centre view's output is the mean of its two inpainted versions (row and
     column). jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept
     without recompiling. Partial grids (views missing off the cross-hair are all zero): those

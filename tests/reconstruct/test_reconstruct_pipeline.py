@@ -20,10 +20,11 @@ def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
     "kwargs, bound, centre_bound",
     [
         # Measured (5x5x64x64, disparity in [-1, 1], GT-derived edge model): every view
-        # 0.85-1.9 with the defaults (photo-consistent snapping + weighted median are tuned for
-        # real scenes; on this aliased synthetic texture they cost ~0.5), 0.35-1.6 without.
+        # 0.72-2.25 with the defaults (snapping, matting and weighted median; on this 2x2
+        # supersampled texture, where mixed pixels are often exact half-coverage ties, they
+        # cost ~0.5), 0.35-1.6 without.
         (dict(), 2.5, 1.6),
-        (dict(refine=False, sharpen=False), 2.0, 0.5),
+        (dict(refine=False, sharpen=False, matte=False, matte_views=False), 2.0, 0.5),
     ],
 )
 def test_all_views_accuracy(small_scene, kwargs, bound, centre_bound):
@@ -37,7 +38,9 @@ def test_all_views_accuracy(small_scene, kwargs, bound, centre_bound):
     assert np.all(np.isfinite(mse))
     assert mse.max() < bound, np.array2string(mse, precision=2)
     assert mse[U // 2, V // 2] < centre_bound, mse[U // 2, V // 2]
-    # The cross-hair outputs are the inpainted views.
+    if kwargs.get("matte_views", True):
+        return
+    # Without the per-view matting, the cross-hair outputs are the inpainted views.
     np.testing.assert_array_equal(rec.disparity[U // 2, 0], rec.cross_h[0])
     np.testing.assert_array_equal(rec.disparity[0, V // 2], rec.cross_v[0])
 

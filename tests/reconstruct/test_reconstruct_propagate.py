@@ -32,7 +32,9 @@ def test_sharpen_reproduces_reconstruct(small_scene, full_run):
     out = sharpen(lf.views, full_run.centre, ReconstructConfig())
     np.testing.assert_array_equal(out, full_run.centre_sharp)
     # both steps off: the identity
-    plain = sharpen(lf.views, full_run.centre, ReconstructConfig(refine=False, sharpen=False))
+    plain = sharpen(
+        lf.views, full_run.centre, ReconstructConfig(refine=False, matte=False, sharpen=False)
+    )
     np.testing.assert_array_equal(plain, full_run.centre)
 
 
@@ -71,4 +73,4 @@ def test_propagate_under_jit(small_scene, full_run):
     cfg = ReconstructConfig()
     fn = jax.jit(lambda c: propagate(lf.views, c, edges, surface, cfg).disparity)
     out = fn(full_run.centre_sharp)
-    np.testing.assert_allclose(out, full_run.disparity, atol=1e-5)
+    np.testing.assert_allclose(out, full_run.disparity, atol=1e-4)

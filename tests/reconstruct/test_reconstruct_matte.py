@@ -1,0 +1,91 @@
+"""Boundary matting: the side of a depth discontinuity from the colour mixture."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.ndimage import grey_dilation, grey_erosion
+
+from mvedge_jax.reconstruct import ReconstructConfig, boundary_matte
+from mvedge_jax.reconstruct._centre import colour_guide
+from mvedge_jax.synthetic import make_scene
+
+FG, BG = 1.5, -0.5
+
+
+def _edge_scene(edge: float, size: int = 24):
+    """A vertical depth edge at sub-pixel column ``edge`` (foreground on the left): the
+    centre-sampled ground truth and box-filtered colours (red foreground, blue background)."""
+    x = np.arange(size, dtype=np.float64)
+    cover = np.clip(edge - (x - 0.5), 0.0, 1.0)  # foreground fraction of each pixel's box
+    gt_row = np.where(x < edge, FG, BG)
+    fg_col, bg_col = np.array([0.9, 0.2, 0.1]), np.array([0.1, 0.3, 0.8])
+    row = cover[:, None] * fg_col + (1 - cover[:, None]) * bg_col
+    img = np.broadcast_to(row, (size, size, 3)).astype(np.float32)
+    gt = np.broadcast_to(gt_row, (size, size)).astype(np.float32)
+    return gt, img
+
+
+@pytest.mark.parametrize("edge", [10.1, 10.3, 10.45, 10.55, 10.7, 10.9])
+@pytest.mark.parametrize("shift", [-1, 0, 1])
+def test_matte_puts_the_edge_on_the_covered_pixel_centres(edge, shift):
+    gt, img = _edge_scene(edge)
+    # The map's edge is off by up to one pixel (fattened, exact or thinned).
+    d = np.roll(gt, shift, axis=1)
+    d[:, :2], d[:, -2:] = FG, BG
+    out = np.asarray(jax.jit(boundary_matte)(jnp.asarray(d), jnp.asarray(img)))
+    np.testing.assert_allclose(out, gt, atol=1e-5)
+
+
+def test_matte_fixes_fattened_boundaries_of_a_synthetic_scene():
+    # 4x4 supersampling: with 2x2 a pixel whose centre lies just inside an edge often has
+    # exactly half coverage, and the colour cannot tell its side.
+    lf = make_scene(
+        4, grid=(3, 3), size=(64, 64), disparity_range=(-1.0, 1.0), n_objects=3, supersample=4
+    )
+    gt = np.asarray(lf.centre_gt)
+    guide = colour_guide(lf.centre_view, "lab")
+    for fattened in (grey_dilation(gt, size=(2, 2)), grey_erosion(gt, size=(2, 2))):
+        before = np.mean((fattened - gt) ** 2)
+        after = np.mean((np.asarray(boundary_matte(jnp.asarray(fattened), guide)) - gt) ** 2)
+        assert after < 0.3 * before, (before, after)
+    # Ground truth is (almost) a fixed point.
+    out = np.asarray(boundary_matte(jnp.asarray(gt), guide))
+    assert np.mean(np.abs(out - gt) > 0.07) < 0.005
+
+
+def test_matte_leaves_smooth_maps_and_flat_colours_alone():
+    gt, img = _edge_scene(10.3)
+    ramp = np.broadcast_to(np.linspace(-0.3, 0.3, 24, dtype=np.float32), (24, 24))
+    out = boundary_matte(jnp.asarray(ramp), jnp.asarray(img))  # no jump above 0.2
+    np.testing.assert_array_equal(np.asarray(out), ramp)
+    flat = np.full_like(img, 0.5)  # no colour evidence: nothing decided
+    d = np.roll(gt, 1, axis=1)
+    out = boundary_matte(jnp.asarray(d), jnp.asarray(flat))
+    np.testing.assert_array_equal(np.asarray(out), d)
+
+
+def test_matte_vmaps_over_views():
+    gts, imgs = zip(*(_edge_scene(e) for e in (10.2, 10.8)), strict=True)
+    d = jnp.asarray(np.stack([np.roll(g, 1, axis=1) for g in gts]))
+    out = jax.vmap(boundary_matte)(d, jnp.asarray(np.stack(imgs)))
+    for i in range(2):
+        np.testing.assert_array_equal(np.asarray(out[i]), np.asarray(boundary_matte(d[i], imgs[i])))
+
+
+def test_matte_rejects_bad_input():
+    gt, img = _edge_scene(10.3)
+    with pytest.raises(ValueError, match="disparity must have shape"):
+        boundary_matte(jnp.zeros((2, 24, 24)), img)
+    with pytest.raises(ValueError, match="guide must have shape"):
+        boundary_matte(gt, img[:10])
+    with pytest.raises(ValueError, match="radius"):
+        boundary_matte(gt, img, radius=0)
+    with pytest.raises(ValueError, match="spatial_sigma"):
+        boundary_matte(gt, img, spatial_sigma=0.0)
+    with pytest.raises(ValueError, match="matte_radius"):
+        ReconstructConfig(matte_radius=0)
+    with pytest.raises(ValueError, match="matte_jump"):
+        ReconstructConfig(matte_jump=-1.0)
