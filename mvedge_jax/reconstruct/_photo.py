@@ -24,24 +24,24 @@ def _aggregate(cost: Array, reference: Array, radius: int, sigma: float) -> Arra
     if radius == 0:
         return cost
     H, W = reference.shape[:2]
-    k = 2 * radius + 1
-    pad = ((radius, radius), (radius, radius))
+    r = radius
+    pad = ((r, r), (r, r))
     ref_p = jnp.pad(reference, pad + ((0, 0),), mode="edge")
     cost_p = jnp.pad(cost, ((0, 0),) + pad, mode="edge")
     finite_p = jnp.isfinite(cost_p)
     cost_p = jnp.where(finite_p, cost_p, 0.0)
-    oy, ox = jnp.meshgrid(jnp.arange(k), jnp.arange(k), indexing="ij")
-
-    def term(a, b):
-        g = lax.dynamic_slice(ref_p, (a, b, 0), (H, W, reference.shape[-1]))
-        w = jnp.exp(-jnp.sum((g - reference) ** 2, axis=-1) / (2 * sigma * sigma))
-        c = lax.dynamic_slice(cost_p, (0, a, b), (cost.shape[0], H, W))
-        f = lax.dynamic_slice(finite_p, (0, a, b), (cost.shape[0], H, W)).astype(cost.dtype)
-        return w[None] * c * f, w[None] * f
-
-    num, den = jax.tree.map(
-        lambda t: jnp.sum(t, axis=0), jax.vmap(term)(oy.reshape(-1), ox.reshape(-1))
-    )
+    finite_p = finite_p.astype(cost.dtype)
+    num = jnp.zeros_like(cost_p[:, :H, :W])
+    den = jnp.zeros_like(num)
+    # Static unrolled loop over the window offsets (slices of the padded arrays): XLA fuses it
+    # into one pass instead of materialising a (window, G, H, W) stack.
+    for a in range(2 * r + 1):
+        for b in range(2 * r + 1):
+            g = ref_p[a : a + H, b : b + W]
+            w = jnp.exp(-jnp.sum((g - reference) ** 2, axis=-1) / (2 * sigma * sigma))
+            f = finite_p[:, a : a + H, b : b + W]
+            num = num + w[None] * cost_p[:, a : a + H, b : b + W] * f
+            den = den + w[None] * f
     return jnp.where(jnp.isfinite(cost) & (den > 0), num / jnp.maximum(den, 1e-12), jnp.inf)
 
 
