@@ -48,14 +48,11 @@ from ..edges import (
     HORIZONTAL,
     VERTICAL,
     EdgeConfig,
-    bank_width,
-    blur_images,
     detect_edges,
-    filter_disparities,
-    prewitt_bank,
+    soft_filter_responses,
+    soft_select,
 )
-from ..edges._detect import centre_responses, response_magnitude
-from ..edges._pipeline import _LAB_SCALE, _srgb_to_lab, resolve_d_max
+from ..edges._pipeline import resolve_d_max
 from ..lightfield import LightField
 from ._config import RenderConfig
 from ._loss import supervised_loss
@@ -306,11 +303,10 @@ def soft_direction_maps(
 ) -> tuple[Float[Array, "H W"], Float[Array, "H W"], Float[Array, "H W"]]:
     """Soft disparity, confidence and peak ratio of every centre-view pixel, one direction.
 
-    The pre-processing and bank of `soft_edge_maps` (CIELAB / 100, Gaussian pre-blur,
-    Prewitt bank on the centre row of every EPI); then ``p = softmax(r / τ)`` (see
-    ``EndToEndConfig.temperature``), ``d = Σ p_i d_i``, ``c = Σ p_i r_i``,
-    ``ρ = c / mean_i r_i``. With ``temperature = "absolute"`` ``d, c`` equal
-    `soft_edge_maps`.
+    `soft_filter_responses` (the pre-processing and bank of `soft_edge_maps`); then
+    `soft_select`: ``p = softmax(r / τ)`` (see ``EndToEndConfig.temperature``),
+    ``d = Σ p_i d_i``, ``c = Σ p_i r_i``; and the peak ratio ``ρ = c / mean_i r_i``. With
+    ``temperature = "absolute"`` ``d, c`` equal `soft_edge_maps`.
 
     Args:
         views: ``(n, H, W, 3)`` RGB in [0, 1], the central row (``HORIZONTAL``) or column
@@ -330,38 +326,25 @@ def soft_direction_maps(
     """
     if config.d_max is None:
         raise ValueError("EndToEndConfig.d_max is None; set it (or use prepare_scene)")
-    views = jnp.asarray(views)
-    if views.ndim != 4 or views.shape[-1] != 3 or views.shape[0] < 3:
-        raise ValueError(f"views must have shape (n >= 3, H, W, 3); got {tuple(views.shape)}")
-    if direction not in (HORIZONTAL, VERTICAL):
-        raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1); got {direction!r}")
-    dt = jnp.result_type(views, jnp.float32)
-    views = views.astype(dt)
     v = hparams.values()
-    n = views.shape[0]
-    h = n if n % 2 else n + 1
-    d_max = float(config.d_max)
-    disps = filter_disparities(config.n_filters, d_max).astype(dt)
-    bank = prewitt_bank(
-        disps,
-        h,
-        bank_width(h, d_max, 1.5) + 2,
-        shift=jnp.asarray(config.edge_shift, dt),
-        aa_sigma=jnp.asarray(config.aa_sigma, dt),
+    mag, disps = soft_filter_responses(
+        views,
+        d_max=float(config.d_max),
+        n_filters=config.n_filters,
+        presmooth_sigma=v["presmooth_sigma"],
+        edge_shift=config.edge_shift,
+        aa_sigma=config.aa_sigma,
+        blur_radius=config.blur_radius,
+        direction=direction,
     )
-    lab = _srgb_to_lab(views) * _LAB_SCALE
-    blur = blur_images(lab, v["presmooth_sigma"].astype(dt), config.blur_radius)
-    perm = (1, 0, 2, 3) if direction == HORIZONTAL else (2, 0, 1, 3)
-    mag = response_magnitude(centre_responses(jnp.transpose(blur, perm), bank))  # (N, L, n)
-    tau = v["temperature"].astype(dt)
+    tau = v["temperature"].astype(mag.dtype)
     if config.temperature == "relative":
         tau = tau * jnp.max(mag, axis=-1, keepdims=True)
-    p = jax.nn.softmax(mag / tau, axis=-1)
-    d = jnp.sum(p * disps, axis=-1)
-    c = jnp.sum(p * mag, axis=-1)
+    else:
+        tau = tau[..., None]
+    d, c = soft_select(mag, disps, tau)
     peak = c / jnp.mean(mag, axis=-1)
-    out = (d, c, peak)
-    return out if direction == HORIZONTAL else tuple(a.T for a in out)
+    return d, c, peak
 
 
 def soft_point_labels(

@@ -7,6 +7,7 @@ from ._bank import prewitt_bank as prewitt_bank
 from ._config import EdgeConfig as EdgeConfig
 from ._detect import detect_centre_row as detect_centre_row
 from ._detect import soft_detect as soft_detect
+from ._detect import soft_select as soft_select
 from ._edgeset import HORIZONTAL as HORIZONTAL
 from ._edgeset import VERTICAL as VERTICAL
 from ._edgeset import EdgeSet as EdgeSet
@@ -14,6 +15,7 @@ from ._edgeset import concatenate as concatenate
 from ._fit import fit_lines as fit_lines
 from ._pipeline import detect_edges as detect_edges
 from ._pipeline import soft_edge_maps as soft_edge_maps
+from ._pipeline import soft_filter_responses as soft_filter_responses
 from ._render import point_errors as point_errors
 from ._render import render_overlay as render_overlay
 from ._render import render_sparse_disparity as render_sparse_disparity

@@ -150,9 +150,22 @@ def soft_detect(
     References:
         Thesis Alg. 1 (hard argmax/max), relaxed.
     """
-    mag = response_magnitude(centre_responses(epis, bank))  # (N, W, n)
-    p = jax.nn.softmax(mag / temperature, axis=-1)
-    return jnp.sum(p * disparities, axis=-1), jnp.sum(p * mag, axis=-1)
+    return soft_select(response_magnitude(centre_responses(epis, bank)), disparities, temperature)
+
+
+def soft_select(
+    magnitude: Float[Array, "... n"],
+    disparities: Float[Array, " n"],
+    temperature: Float[ArrayLike, ...],
+) -> tuple[Float[Array, ...], Float[Array, ...]]:
+    """Softmax over filter-response magnitudes (the relaxed argmax / max of Alg. 1).
+
+    ``p_i = softmax(r_i / temperature)`` over the last axis; returns the expected disparity
+    ``Σ p_i d_i`` and the soft confidence ``Σ p_i r_i``. ``temperature`` broadcasts against
+    ``magnitude[..., :1]`` (a scalar, or per pixel for a relative temperature).
+    """
+    p = jax.nn.softmax(magnitude / temperature, axis=-1)
+    return jnp.sum(p * disparities, axis=-1), jnp.sum(p * magnitude, axis=-1)
 
 
 def top_candidates(

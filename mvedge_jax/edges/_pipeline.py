@@ -16,11 +16,13 @@ from ..lightfield import LightField
 from ._bank import bank_width, blur_images, filter_disparities, prewitt_bank
 from ._config import EdgeConfig
 from ._detect import (
+    centre_responses,
     detect_centre_row,
     local_std,
     non_max_suppress,
     parabola_offset,
-    soft_detect,
+    response_magnitude,
+    soft_select,
     top_candidates,
 )
 from ._edgeset import HORIZONTAL, VERTICAL, EdgeSet, concatenate
@@ -429,6 +431,67 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
     return edges
 
 
+def soft_filter_responses(
+    views: Float[Array, "n H W 3"],
+    *,
+    d_max: float,
+    n_filters: int = 61,
+    presmooth_sigma: Float[ArrayLike, ""] = 0.85,
+    edge_shift: Float[ArrayLike, ""] = 1.0,
+    aa_sigma: Float[ArrayLike, ""] = 0.0,
+    blur_radius: int = 3,
+    direction: int = HORIZONTAL,
+) -> tuple[Float[Array, "H W n"], Float[Array, " n"]]:
+    """Filter-bank response magnitudes of every centre-view pixel (differentiable).
+
+    The pre-processing of `detect_edges` (CIELAB / 100, Gaussian pre-blur) and the Prewitt
+    bank applied on the centre row of every EPI of a row or column of views. Gradients reach
+    the views, ``presmooth_sigma``, ``edge_shift`` and ``aa_sigma``.
+
+    Args:
+        views: ``(n, H, W, 3)`` RGB in [0, 1]: the central row of views (``direction =
+            HORIZONTAL``) or the central column (``VERTICAL``), ``n >= 3``.
+        d_max: the bank covers ``[-d_max, d_max]`` (static).
+        n_filters: number of filters (static).
+        presmooth_sigma: pre-blur, pixels.
+        edge_shift, aa_sigma: see `prewitt_bank`.
+        blur_radius: pre-blur kernel half-width (static).
+        direction: `HORIZONTAL` or `VERTICAL` EPIs.
+
+    Returns:
+        ``(magnitude (H, W, n_filters), disparities (n_filters,))``: response magnitudes (LAB
+        / 100 units) and the bank's disparities (pixels per view step), in the dtype of
+        ``views`` (at least float32).
+
+    Raises:
+        ValueError: fewer than 3 views, a bad shape or an unknown direction.
+
+    References:
+        Thesis Alg. 1 (the responses its argmax / max act on).
+    """
+    views = jnp.asarray(views)
+    if views.ndim != 4 or views.shape[-1] != 3 or views.shape[0] < 3:
+        raise ValueError(f"views must have shape (n >= 3, H, W, 3); got {tuple(views.shape)}")
+    if direction not in (HORIZONTAL, VERTICAL):
+        raise ValueError(f"direction must be HORIZONTAL (0) or VERTICAL (1); got {direction!r}")
+    dt = jnp.result_type(views, jnp.float32)
+    views = views.astype(dt)
+    n = views.shape[0]
+    h = n if n % 2 else n + 1
+    disps = filter_disparities(n_filters, d_max).astype(dt)
+    bank = prewitt_bank(
+        disps,
+        h,
+        bank_width(h, d_max, 1.5) + 2,
+        shift=jnp.asarray(edge_shift, dt),
+        aa_sigma=jnp.asarray(aa_sigma, dt),
+    )
+    blur = blur_images(_srgb_to_lab(views) * _LAB_SCALE, presmooth_sigma, blur_radius)
+    perm = (1, 0, 2, 3) if direction == HORIZONTAL else (2, 0, 1, 3)
+    mag = response_magnitude(centre_responses(jnp.transpose(blur, perm), bank))  # (A, B, n)
+    return (mag if direction == HORIZONTAL else jnp.swapaxes(mag, 0, 1)), disps
+
+
 def soft_edge_maps(
     views: Float[Array, "n H W 3"],
     *,
@@ -443,9 +506,10 @@ def soft_edge_maps(
 ) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
     """Differentiable (soft) edge detection on the centre view of a row or column of views.
 
-    The same pre-processing as `detect_edges` (CIELAB / 100, Gaussian pre-blur, Prewitt bank),
-    then `soft_detect`: a softmax over the filter responses instead of argmax / max. Gradients
-    reach the views, ``presmooth_sigma``, ``temperature``, ``edge_shift`` and ``aa_sigma``.
+    `soft_filter_responses` (the pre-processing and bank of `detect_edges`), then
+    `soft_select`: a softmax over the filter responses instead of argmax / max (as
+    `soft_detect` does on EPIs). Gradients reach the views, ``presmooth_sigma``,
+    ``temperature``, ``edge_shift`` and ``aa_sigma``.
 
     Args:
         views: ``(n, H, W, 3)`` RGB in [0, 1]: the central row of views (``direction =
@@ -463,20 +527,19 @@ def soft_edge_maps(
         every centre-view pixel.
 
     Raises:
-        ValueError: fewer than 3 views or a bad shape.
+        ValueError: fewer than 3 views, a bad shape or an unknown direction.
 
     References:
         Thesis Alg. 1, relaxed (softmax for argmax).
     """
-    if views.ndim != 4 or views.shape[-1] != 3 or views.shape[0] < 3:
-        raise ValueError(f"views must have shape (n >= 3, H, W, 3); got {tuple(views.shape)}")
-    n = views.shape[0]
-    h = n if n % 2 else n + 1
-    disps = filter_disparities(n_filters, d_max).astype(jnp.result_type(views, jnp.float32))
-    bank = prewitt_bank(
-        disps, h, bank_width(h, d_max, 1.5) + 2, shift=edge_shift, aa_sigma=aa_sigma
+    mag, disps = soft_filter_responses(
+        views,
+        d_max=d_max,
+        n_filters=n_filters,
+        presmooth_sigma=presmooth_sigma,
+        edge_shift=edge_shift,
+        aa_sigma=aa_sigma,
+        blur_radius=blur_radius,
+        direction=direction,
     )
-    blur = blur_images(_srgb_to_lab(views) * _LAB_SCALE, presmooth_sigma, blur_radius)
-    perm = (1, 0, 2, 3) if direction == HORIZONTAL else (2, 0, 1, 3)
-    d, c = soft_detect(jnp.transpose(blur, perm), bank, disps, temperature)
-    return (d, c) if direction == HORIZONTAL else (d.T, c.T)
+    return soft_select(mag, disps, temperature)
