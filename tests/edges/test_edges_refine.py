@@ -91,9 +91,7 @@ def test_outlier_agreement_test_keeps_isolated_points_and_drops_disagreeing_ones
     ys = [5, 5, 5, 6, 6, 6, 7, 13]
     labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
     e = _edges(xs, ys, np.zeros(8), [0.1] * 8)
-    cfg = EdgeConfig(
-        outlier_test="agreement", outlier_window_frac=1 / 3, outlier_min_agreement=0.3
-    )
+    cfg = EdgeConfig(outlier_test="agreement", outlier_window_frac=1 / 3, outlier_min_agreement=0.3)
     keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
     # cluster: 6 of 7 neighbours agree; label 30: 1 of 7; isolated: 1 of 1.
     assert keep.tolist() == [True] * 6 + [False, True]
