@@ -4,16 +4,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 from jaxtyping import Array, ArrayLike, Float
 
-
-def _window_range(d: Array, radius: int) -> tuple[Array, Array]:
-    k = 2 * radius + 1
-    pad = jnp.pad(d, radius, mode="edge")
-    hi = lax.reduce_window(pad, -jnp.inf, lax.max, (k, k), (1, 1), "VALID")
-    lo = lax.reduce_window(pad, jnp.inf, lax.min, (k, k), (1, 1), "VALID")
-    return lo, hi
+from ._photo import _window_extrema
 
 
 def boundary_matte(
@@ -82,9 +75,9 @@ def boundary_matte(
     if not spatial_sigma > 0:
         raise ValueError(f"spatial_sigma must be > 0; got {spatial_sigma}")
     H, W = d.shape
-    lo, hi = _window_range(d, radius)
+    lo, hi = _window_extrema(d, radius)
     band = (hi - lo) > jump
-    lo1, hi1 = _window_range(d, 1)
+    lo1, hi1 = _window_extrema(d, 1)
     purity = jnp.where((hi1 - lo1) > jump, jnp.asarray(impure_weight, d.dtype), 1.0)
     mid = 0.5 * (lo + hi)
 

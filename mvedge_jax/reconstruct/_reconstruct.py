@@ -188,6 +188,19 @@ def _check_views(views) -> tuple[int, int, int, int]:
     return U, V, H, W
 
 
+def _check_views_and_centre(views, centre_disparity) -> tuple[Array, Array]:
+    """float32 views and centre map, shapes checked (`_check_views`, centre ``(H, W)``)."""
+    views = jnp.asarray(views, jnp.float32)
+    _, _, H, W = _check_views(views)
+    centre = jnp.asarray(centre_disparity, jnp.float32)
+    if centre.shape != (H, W):
+        raise ValueError(
+            f"centre_disparity must have shape {(H, W)} (the views' H, W); "
+            f"got {tuple(centre.shape)}"
+        )
+    return views, centre
+
+
 def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
     """Step 2 of `reconstruct` (traced inline; see `sharpen`)."""
     U, V = views.shape[:2]
@@ -245,14 +258,7 @@ def sharpen(
     References:
         Thesis Sec. 6.1 (weighted median sharpening), Sec. 7.2.1 (WMF post-processing).
     """
-    views = jnp.asarray(views, jnp.float32)
-    U, V, H, W = _check_views(views)
-    centre = jnp.asarray(centre_disparity, jnp.float32)
-    if centre.shape != (H, W):
-        raise ValueError(
-            f"centre_disparity must have shape {(H, W)} (the views' H, W); "
-            f"got {tuple(centre.shape)}"
-        )
+    views, centre = _check_views_and_centre(views, centre_disparity)
     return _sharpen(views, centre, config)
 
 
@@ -382,14 +388,8 @@ def propagate(
         Thesis Sec. 6.1, eqs 6.4–6.8 (forward projection, angular EPI inpainting, off-cross-hair
         views); SPEC §4 steps 3–6.
     """
-    views = jnp.asarray(views, jnp.float32)
-    U, V, H, W = _check_views(views)
-    centre = jnp.asarray(centre_disparity, jnp.float32)
-    if centre.shape != (H, W):
-        raise ValueError(
-            f"centre_disparity must have shape {(H, W)} (the views' H, W); "
-            f"got {tuple(centre.shape)}"
-        )
+    views, centre = _check_views_and_centre(views, centre_disparity)
+    U, V = views.shape[:2]
     _check_inputs(edges, surface, views[U // 2, V // 2])
     disparity, cross_h, cross_v = _propagate(views, centre, edges, surface, config)
     return Reconstruction(
