@@ -22,6 +22,7 @@ from mvedge_jax.pipeline import (
     optimize_steps,
     write_outputs,
 )
+from mvedge_jax.reconstruct import sharpen
 from mvedge_jax.synthetic import make_scene
 
 QUALITY_KEYS = {"view_consistency", "mse_x100", "badpix_0.01", "badpix_0.03", "badpix_0.07"}
@@ -62,6 +63,23 @@ def test_optimize_returns_a_finite_result_for_every_view(api_run):
     assert info["optimize_seconds"] > 0 and info["propagate_seconds"] > 0
 
 
+def test_optimize_merges_with_the_initial_map(api_run):
+    """The propagated centre map takes, pixel by pixel, either the Ch. 6 value or the
+    sharpened optimised value (`select_centre`)."""
+    lf, res, new, info, _ = api_run
+    initial = info["centre_initial"]
+    sharp = np.asarray(sharpen(lf.views, info["centre_optimized"], PipelineConfig().reconstruct))
+    merged = np.asarray(new.reconstruction.centre_sharp)
+    from_initial = np.isclose(merged, initial, atol=1e-5)
+    from_optimized = np.isclose(merged, sharp, atol=1e-5)
+    assert np.all(from_initial | from_optimized)
+    took = ~from_initial
+    assert 0.0 < info["selected_fraction"] < 1.0
+    assert np.mean(took) == pytest.approx(info["selected_fraction"], abs=0.01)
+    # only values that differ by more than the minimum change were taken
+    assert np.all(np.abs(sharp - initial)[took] > 0.02 - 1e-6)
+
+
 def test_optimize_decreases_the_loss_and_stays_accurate(api_run):
     """Measured on this scene: loss 0.0205 → 0.0198 in 12 steps; centre MSE×100 1.26 (Ch. 6)
     → 1.20, BadPix(0.07) 12.8 → 10.4; every view ≤ 3.3 (Ch. 6: ≤ 3.5). Bounds are regression
@@ -95,6 +113,7 @@ def test_write_outputs_records_the_initial_result(api_run, tmp_path):
     )
     assert on_disk["optimize_seconds"] == pytest.approx(info["optimize_seconds"])
     assert on_disk["loss_history"] == pytest.approx(info["loss_history"])
+    assert on_disk["optimize_selected_fraction"] == pytest.approx(info["selected_fraction"])
     assert "optimize" in on_disk["seconds_per_stage"]
     assert (out / "centre_disparity_initial.png").is_file()
     npz = np.load(out / "disparity.npz")

@@ -11,9 +11,11 @@ from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges
 from ._photo import photo_cost as photo_cost
 from ._photo import photo_refine as photo_refine
+from ._photo import photo_select as photo_select
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
 from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
+from ._reconstruct import select_centre as select_centre
 from ._reconstruct import sharpen as sharpen
 from ._wmf import weighted_median_filter as weighted_median_filter

@@ -69,6 +69,9 @@ class ReconstructConfig(eqx.Module):
         matte_min_separation: `boundary_matte` decides only where the foreground and
             background colours differ by at least this (guide units).
         matte_impure_weight: weight of window pixels on a discontinuity in the colour means.
+        select_min_change: `select_centre` tests a candidate centre map only where it differs
+            from the incumbent by more than this (pixels per view step).
+        select_margin: colour-cost advantage the candidate needs there (L1 colour units).
         fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
         fill_data_weight: data weight of the reprojected pixels in that solve.
         upsample: solve the centre problem on an ``upsample×`` grid (1 or 2) and average
@@ -90,6 +93,7 @@ class ReconstructConfig(eqx.Module):
         matte_views: apply `boundary_matte` to every other view's final map too (reprojected
             boundaries are only pixel-accurate); ~20 ms per 512² view.
         matte_radius: window radius of `boundary_matte`.
+        select_aggregate: radius of the colour-weighted cost aggregation of `select_centre`.
         matte_sigma: distance scale of its colour means, pixels.
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
             (nearest valid farther value along the row) for off-cross-hair views.
@@ -130,6 +134,8 @@ class ReconstructConfig(eqx.Module):
     matte_jump: Array = eqx.field(converter=_f32, default=0.2)
     matte_min_separation: Array = eqx.field(converter=_f32, default=0.1)
     matte_impure_weight: Array = eqx.field(converter=_f32, default=0.05)
+    select_min_change: Array = eqx.field(converter=_f32, default=0.02)
+    select_margin: Array = eqx.field(converter=_f32, default=0.0)
     fill_c: Array = eqx.field(converter=_f32, default=1.0)
     fill_data_weight: Array = eqx.field(converter=_f32, default=1000.0)
     upsample: int = eqx.field(static=True, default=1)
@@ -146,6 +152,7 @@ class ReconstructConfig(eqx.Module):
     matte_views: bool = eqx.field(static=True, default=True)
     matte_radius: int = eqx.field(static=True, default=2)
     matte_sigma: float = eqx.field(static=True, default=1.0)
+    select_aggregate: int = eqx.field(static=True, default=3)
     hole_fill: str = eqx.field(static=True, default="solve")
     merge: str = eqx.field(static=True, default="photo")
     crack_parallax: float = eqx.field(static=True, default=0.5)
@@ -173,6 +180,8 @@ class ReconstructConfig(eqx.Module):
             "matte_jump",
             "matte_min_separation",
             "matte_impure_weight",
+            "select_min_change",
+            "select_margin",
         )
         positive = ("centre_eps", "wmf_sigma", "epi_eps", "epi_photo_sigma")
         for name in nonneg + positive:
@@ -211,6 +220,10 @@ class ReconstructConfig(eqx.Module):
             raise ValueError(
                 f"ReconstructConfig.matte_radius must be >= 1 and matte_sigma > 0; got "
                 f"{self.matte_radius}, {self.matte_sigma}"
+            )
+        if int(self.select_aggregate) < 0:
+            raise ValueError(
+                f"ReconstructConfig.select_aggregate must be >= 0; got {self.select_aggregate}"
             )
         if int(self.wmf_radius) < 1 or int(self.wmf_iterations) < 1:
             raise ValueError(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from jax import lax
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from ..lightfield import backward_warp
 
@@ -142,3 +142,56 @@ def photo_refine(
         return jnp.where(take, best, d)
 
     return lax.fori_loop(0, iterations, one, disparity)
+
+
+def photo_select(
+    incumbent: Float[Array, "H W"],
+    candidate: Float[Array, "H W"],
+    reference: Float[Array, "H W C"],
+    views: Float[Array, "K H W C"],
+    offsets: Float[Array, "K 2"],
+    *,
+    min_change: float | Array = 0.02,
+    margin: float | Array = 0.0,
+    aggregate: int = 3,
+    sigma: float | Array = 0.1,
+) -> tuple[Float[Array, "H W"], Bool[Array, "H W"]]:
+    """Per-pixel choice between two disparity maps of one view by multi-view photo-consistency.
+
+    A pixel takes ``candidate`` where it differs from ``incumbent`` by more than
+    ``min_change`` and its `photo_cost` (occlusion-aware, colour-weighted aggregation over a
+    ``(2 aggregate + 1)²`` window) is lower than the incumbent's by more than ``margin``;
+    elsewhere it keeps ``incumbent``. Self-supervised (colours only, no ground truth). Used
+    to merge the Ch. 7 optimised centre map with the Ch. 6 map it started from: the
+    optimisation fixes gross errors at depth edges but re-renders the whole map from points,
+    losing fine accuracy where the Ch. 6 map was already right (not in the thesis). Not
+    differentiable in the choice (a selection).
+
+    Args:
+        incumbent: ``(H, W)`` disparity of the reference view (pixels per view step), kept
+            unless the candidate is clearly better.
+        candidate: ``(H, W)`` alternative disparity of the same view.
+        reference: ``(H, W, C)`` colour of the reference view.
+        views: ``(K, H, W, C)`` other views.
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each view relative to the reference.
+        min_change: smallest ``|candidate − incumbent|`` (pixels per view step) that is
+            tested; smaller differences are below what colour can decide.
+        margin: cost advantage the candidate needs (colour units, L1 over channels).
+        aggregate: radius of the colour-weighted cost aggregation of `photo_cost`.
+        sigma: colour scale of the aggregation weights.
+
+    Returns:
+        ``(selected (H, W), took (H, W) bool)``: the merged map and where the candidate won.
+
+    Raises:
+        ValueError: if the two maps differ in shape.
+    """
+    if incumbent.shape != candidate.shape:
+        raise ValueError(
+            f"incumbent and candidate must have the same shape; got {tuple(incumbent.shape)} "
+            f"and {tuple(candidate.shape)}"
+        )
+    cost = lambda d: photo_cost(d, reference, views, offsets, aggregate=aggregate, sigma=sigma)
+    c_inc, c_cand = cost(incumbent), cost(candidate)
+    took = (jnp.abs(candidate - incumbent) > min_change) & (c_cand + margin < c_inc)
+    return jnp.where(took, candidate, incumbent), took
