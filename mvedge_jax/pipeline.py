@@ -47,9 +47,13 @@ STAGES = ("edges", "surface", "reconstruct")
 #: visible neighbours from hiding each other; larger tile capacities avoid overflow with
 #: dense points; one pass at a third of the authors' learning rates (Adam moves every label
 #: by about the learning rate per step, and more passes did not help on HCI crops).
-#: Measured at full resolution (centre view, Ch. 6 → optimised): backgammon MSE×100
-#: 1.43 → 1.60, BadPix(0.07) 1.87 → 1.60, BadPix(0.01) 14.0 → 24.6; antinous 7.96 → 7.74,
-#: 16.3 → 12.8, 74.6 → 62.1. ``OptimizeConfig()`` (one pass) instead: backgammon 3.64, 4.99.
+#: Measured at full resolution (centre view, Ch. 6 → optimised and sharpened, before the
+#: merge of `optimize_disparity`'s ``select_initial``): backgammon MSE×100 1.31 → 1.33,
+#: BadPix(0.07) 1.76 → 1.45, BadPix(0.01) 13.9 → 24.5; antinous 8.10 → 7.88, 16.4 → 12.7,
+#: 74.6 → 62.3 (session 3). With the merge: backgammon 1.31, 1.29, 12.1; antinous 7.81,
+#: 12.8, 68.5 (session 4). ``OptimizeConfig()`` (one pass) instead:
+#: backgammon 3.64, 4.99 (session 2). Twice the label rate (0.01) instead: antinous 7.98,
+#: 12.96, 62.1 before the merge (session 4; worse than 0.005).
 OPTIMIZE_DEFAULT = OptimizeConfig(
     model=ModelConfig(
         render=RenderConfig(
