@@ -512,15 +512,10 @@ def soft_edge_maps(
     ``temperature``, ``edge_shift`` and ``aa_sigma``.
 
     Args:
-        views: ``(n, H, W, 3)`` RGB in [0, 1]: the central row of views (``direction =
-            HORIZONTAL``) or the central column (``VERTICAL``), ``n >= 3``.
-        d_max: the bank covers ``[-d_max, d_max]`` (static).
-        n_filters: number of filters (static).
-        presmooth_sigma: pre-blur, pixels.
+        views, d_max, n_filters, presmooth_sigma, edge_shift, aa_sigma, blur_radius,
+            direction: as `soft_filter_responses` (``views`` is ``(n, H, W, 3)`` RGB in
+            [0, 1], ``n >= 3``).
         temperature: softmax temperature (response units, LAB / 100).
-        edge_shift, aa_sigma: see `prewitt_bank`.
-        blur_radius: pre-blur kernel half-width (static).
-        direction: `HORIZONTAL` or `VERTICAL` EPIs.
 
     Returns:
         ``(disparity, confidence)``, each ``(H, W)``: expected disparity and soft confidence of

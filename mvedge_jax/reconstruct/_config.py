@@ -93,8 +93,8 @@ class ReconstructConfig(eqx.Module):
         matte_views: apply `boundary_matte` to every other view's final map too (reprojected
             boundaries are only pixel-accurate); ~20 ms per 512² view.
         matte_radius: window radius of `boundary_matte`.
-        select_aggregate: radius of the colour-weighted cost aggregation of `select_centre`.
         matte_sigma: distance scale of its colour means, pixels.
+        select_aggregate: radius of the colour-weighted cost aggregation of `select_centre`.
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
             (nearest valid farther value along the row) for off-cross-hair views.
         merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
