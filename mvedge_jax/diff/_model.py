@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
@@ -174,6 +175,7 @@ def predict(
     *,
     valid: Bool[ArrayLike, " N"] | None = None,
     x0: Float[ArrayLike, "H W"] | None = None,
+    prior: Float[ArrayLike, "H W"] | None = None,
 ) -> Prediction:
     """Render the points and diffuse them into a dense label map (eq 7.2).
 
@@ -181,14 +183,26 @@ def predict(
     (λ scaled by ``label_weight``) and ``ϑ`` from `smoothness_weights`, solved by the
     differentiable `solve_poisson` (gradients by one adjoint solve). jit-able.
 
+    With a ``prior`` map ``P`` (not in the thesis), the points' departures from the prior are
+    diffused instead: ``D = P + argmin Σ λ (X - (S - P))² + Σ_edges ϑ (X_p - X_q)²``. The
+    smoothness then penalises the gradient of ``D - P`` rather than of ``D``, so a slanted
+    surface known to the prior keeps its slope between sparse labels (plain diffusion
+    flattens a steep ramp whose labels are weak against the smoothness), and labels equal
+    to the prior reproduce it. Used to refine a dense map (the Ch. 6 result) rather than
+    to rebuild it from the points.
+
     Args:
         params: `DiffParams` (position, label, R, Q).
         config: `ModelConfig`.
         valid: ``(N,)`` bool mask of the points (default all).
-        x0: optional warm start of the solve (no gradient flows through it).
+        x0: optional warm start of the solve, a disparity map (no gradient flows through it).
+        prior: optional ``(H, W)`` disparity map ``P`` (no gradient flows into it).
 
     Returns:
         `Prediction` with the ``(H, W)`` disparity, the rendered maps and the solve status.
+
+    Raises:
+        ValueError: if ``prior`` does not have the shape ``(H, W)`` of ``params.Q``.
 
     References:
         Thesis eqs 7.1–7.2, Sec. 7.1.5 (ϑ = exp(-Q), w = exp(-R)).
@@ -197,8 +211,17 @@ def predict(
     rendered = render(params.position, params.label, params.R, shape, config.render, valid=valid)
     wx, wy = smoothness_weights(params.Q, config.smoothness)
     lam = rendered.weight * jnp.asarray(config.label_weight, rendered.weight.dtype)
-    sol = solve_poisson(lam, rendered.label, wx, wy, x0=x0, config=config.solver)
-    return Prediction(disparity=sol.x, rendered=rendered, solve=sol)
+    if prior is None:
+        sol = solve_poisson(lam, rendered.label, wx, wy, x0=x0, config=config.solver)
+        return Prediction(disparity=sol.x, rendered=rendered, solve=sol)
+    prior = jnp.asarray(prior, lam.dtype)
+    if prior.shape != shape:
+        raise ValueError(f"prior must have shape {shape}; got {tuple(prior.shape)}")
+    prior = jax.lax.stop_gradient(prior)
+    residual = jnp.where(lam > 0, rendered.label - prior, 0.0)
+    r0 = None if x0 is None else jnp.asarray(x0, lam.dtype) - prior
+    sol = solve_poisson(lam, residual, wx, wy, x0=r0, config=config.solver)
+    return Prediction(disparity=prior + sol.x, rendered=rendered, solve=sol)
 
 
 def sample_bilinear(image: Float[ArrayLike, "H W"], position: Float[ArrayLike, "N 2"]) -> Array:

@@ -88,13 +88,15 @@ _DEFAULT_OPTIMIZE = OptimizeConfig()
 
 
 class Data(eqx.Module):
-    """What the loss compares against (any of the fields may be ``None``)."""
+    """What the loss compares against (any of the fields may be ``None``), and the prior map
+    of the diffusion (`predict`'s ``prior``)."""
 
     centre: Float[Array, "H W 3"] | None
     others: Float[Array, "K H W 3"] | None
     offsets: Float[Array, "K 2"] | None
     target: Float[Array, "H W"] | None
     target_mask: Bool[Array, "H W"] | None
+    prior: Float[Array, "H W"] | None = None
 
 
 def objective(disparity: Array, data: Data, config: LossConfig) -> Array:
@@ -124,7 +126,7 @@ def _step(params: DiffParams, states, block, lr, x0, valid, data: Data, config: 
     """
 
     def loss_fn(p):
-        pred = predict(p, config.model, valid=valid, x0=x0)
+        pred = predict(p, config.model, valid=valid, x0=x0, prior=data.prior)
         return objective(pred.disparity, data, config.loss), pred
 
     (loss, pred), grads = jax.value_and_grad(loss_fn, has_aux=True)(params)
@@ -197,6 +199,7 @@ def optimize(
     target_disparity: Float[ArrayLike, "H W"] | None = None,
     target_mask: Bool[ArrayLike, "H W"] | None = None,
     valid: Bool[ArrayLike, " N"] | None = None,
+    prior: Float[ArrayLike, "H W"] | None = None,
     callback: Callable[[int, dict], None] | None = None,
 ) -> tuple[DiffParams, dict[str, np.ndarray]]:
     """Optimise the point set and smoothness by block-coordinate Adam (thesis Sec. 7.1.5).
@@ -217,6 +220,9 @@ def optimize(
         target_disparity: ``(H, W)`` disparity for the supervised loss, or ``None``.
         target_mask: ``(H, W)`` bool pixels of the target to use (default all).
         valid: ``(N,)`` bool point mask (default: the EdgeSet's, or all).
+        prior: optional ``(H, W)`` disparity map whose departures the points encode
+            (`predict`'s ``prior``; e.g. the Ch. 6 map being refined); also the first warm
+            start of the solve.
         callback: called as ``callback(step, info)`` after every step (progress bars).
 
     Returns:
@@ -266,13 +272,19 @@ def optimize(
             tmask = jnp.asarray(target_mask, bool)
             if tmask.shape != (H, W):
                 raise ValueError(f"target_mask must have shape {(H, W)}; got {tmask.shape}")
-    data = Data(centre=centre, others=others, offsets=offs, target=target, target_mask=tmask)
+    if prior is not None:
+        prior = jnp.asarray(prior, params.label.dtype)
+        if prior.shape != (H, W):
+            raise ValueError(f"prior must have shape {(H, W)}; got {tuple(prior.shape)}")
+    data = Data(
+        centre=centre, others=others, offsets=offs, target=target, target_mask=tmask, prior=prior
+    )
     if valid is not None:
         valid = jnp.asarray(valid, bool)
         if valid.shape != params.label.shape:
             raise ValueError(f"valid must have shape {params.label.shape}; got {valid.shape}")
 
-    x0 = jnp.zeros((H, W), params.label.dtype)
+    x0 = jnp.zeros((H, W), params.label.dtype) if prior is None else prior
     hist: dict[str, list] = {
         k: []
         for k in (

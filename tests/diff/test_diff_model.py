@@ -104,8 +104,10 @@ def _tiny_lightfield(H=14, W=15):
     )
 
 
-def test_full_chain_grad(x64):
-    """check_grads through render → diffusion (adjoint solve) → supervised + eq 7.16 loss."""
+@pytest.mark.parametrize("with_prior", [False, True])
+def test_full_chain_grad(x64, with_prior):
+    """check_grads through render → diffusion (adjoint solve) → supervised + eq 7.16 loss
+    (also with the residual diffusion from a prior map)."""
     centre, others, offsets = _tiny_lightfield()
     H, W = centre.shape[:2]
     pos = jnp.array([[3.3, 4.2], [9.6, 3.7], [5.2, 10.4], [11.7, 9.1], [7.4, 7.2]], jnp.float64)
@@ -118,12 +120,41 @@ def test_full_chain_grad(x64):
     p0 = eqx.tree_at(lambda p: p.R, p0, jnp.array([0.1, -0.2, 0.0, 0.3, -0.1]))
     target = jnp.asarray(np.random.default_rng(0).uniform(0.3, 0.9, (H, W)))
     lcfg = LossConfig(occlusion_tolerance=0.25)
+    prior = None
+    if with_prior:
+        yy = jnp.arange(H, dtype=jnp.float64)[:, None] * jnp.ones((1, W))
+        prior = 0.4 + 0.03 * yy
 
     def loss(pos, lab, R, Q):
         p = DiffParams(position=pos, label=lab, R=R, Q=Q)
-        d = predict(p, cfg).disparity
+        d = predict(p, cfg, prior=prior).disparity
         return supervised_loss(d, target) + self_supervised_loss(d, centre, others, offsets, lcfg)
 
     check_grads(
         jax.jit(loss), (p0.position, p0.label, p0.R, p0.Q), order=1, modes=("rev",), eps=1e-6
     )
+
+
+def test_prior_keeps_the_slope_between_sparse_labels():
+    # A steep ramp (0.1 per row) known only at a few weak points. Plain diffusion (eq 7.2)
+    # flattens it between them; diffusing the labels' residuals from a prior that has the
+    # right slope (but a wrong offset) keeps the slope and takes the offset from the labels.
+    H, W = 32, 24
+    yy = np.arange(H, dtype=np.float32)[:, None] * np.ones((1, W), np.float32)
+    ramp = 0.1 * (yy - H / 2)
+    pos = jnp.array([[4.0, 6.0], [18.0, 9.0], [10.0, 20.0], [5.0, 27.0], [20.0, 25.0]])
+    lab = sample_bilinear(jnp.asarray(ramp), pos)
+    cfg = ModelConfig(label_weight=1.0)
+    p = initial_params(pos, lab, jnp.zeros((H, W, 3)), cfg)
+    plain = np.asarray(_predict(p, cfg).disparity)
+    assert np.abs(plain - ramp).max() > 0.5  # flattened towards the labels' mean
+    prior = jnp.asarray(ramp + 0.3)
+    d = np.asarray(_predict(p, cfg, prior=prior).disparity)
+    assert np.abs(d - ramp).max() < 0.05
+    # labels equal to the prior reproduce it exactly
+    same = initial_params(pos, sample_bilinear(prior, pos), jnp.zeros((H, W, 3)), cfg)
+    np.testing.assert_allclose(
+        np.asarray(_predict(same, cfg, prior=prior).disparity), np.asarray(prior), atol=0.05
+    )
+    with pytest.raises(ValueError, match="prior must have shape"):
+        predict(p, cfg, prior=jnp.zeros((H, W + 1)))
