@@ -42,6 +42,7 @@ import numpy as np  # noqa: E402
 from scipy.ndimage import maximum_filter, minimum_filter  # noqa: E402
 
 from mvedge_jax.io import load_light_field, read_pfm  # noqa: E402
+from mvedge_jax.pipeline import cross_hair_others  # noqa: E402
 from mvedge_jax.reconstruct import photo_cost  # noqa: E402
 
 BAD = 0.07
@@ -49,11 +50,7 @@ BAD = 0.07
 
 def photo_optimal_offset(lf, deltas: np.ndarray, aggregate: int) -> np.ndarray:
     """``(H, W)`` offset ``δ*`` from the GT of the smallest colour cost (centre view)."""
-    U, V = lf.grid
-    rc, cc = lf.centre_index
-    pos = [(rc, c) for c in range(V) if c != cc] + [(r, cc) for r in range(U) if r != rc]
-    views = jnp.stack([lf.views[r, c] for r, c in pos])
-    offsets = jnp.asarray([(r - rc, c - cc) for r, c in pos], jnp.float32)
+    views, offsets = cross_hair_others(lf.views)
     gt = jnp.asarray(lf.centre_gt, jnp.float32)
     ref = lf.centre_view
 

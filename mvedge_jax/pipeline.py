@@ -51,7 +51,9 @@ STAGES = ("edges", "surface", "reconstruct")
 #: merge of `optimize_disparity`'s ``select_initial``): backgammon MSE×100 1.31 → 1.33,
 #: BadPix(0.07) 1.76 → 1.45, BadPix(0.01) 13.9 → 24.5; antinous 8.10 → 7.88, 16.4 → 12.7,
 #: 74.6 → 62.3 (session 3). With the merge: backgammon 1.31, 1.29, 12.1; antinous 7.81,
-#: 12.8, 68.5 (session 4). ``OptimizeConfig()`` (one pass) instead:
+#: 12.8, 68.5 (session 4). With the merge and the residual diffusion of
+#: `optimize_disparity`'s ``diffuse_residual`` (the default since session 5): backgammon
+#: 1.29, 1.24, 12.3; antinous 6.50, 12.8, 69.9. ``OptimizeConfig()`` (one pass) instead:
 #: backgammon 3.64, 4.99 (session 2). Twice the label rate (0.01) instead: antinous 7.98,
 #: 12.96, 62.1 before the merge (session 4; worse than 0.005).
 OPTIMIZE_DEFAULT = OptimizeConfig(

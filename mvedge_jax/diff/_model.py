@@ -218,9 +218,9 @@ def predict(
     if prior.shape != shape:
         raise ValueError(f"prior must have shape {shape}; got {tuple(prior.shape)}")
     prior = jax.lax.stop_gradient(prior)
-    residual = jnp.where(lam > 0, rendered.label - prior, 0.0)
+    # where λ = 0 the target is multiplied by 0: no mask needed
     r0 = None if x0 is None else jnp.asarray(x0, lam.dtype) - prior
-    sol = solve_poisson(lam, residual, wx, wy, x0=r0, config=config.solver)
+    sol = solve_poisson(lam, rendered.label - prior, wx, wy, x0=r0, config=config.solver)
     return Prediction(disparity=prior + sol.x, rendered=rendered, solve=sol)
 
 

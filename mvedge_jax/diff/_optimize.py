@@ -272,10 +272,8 @@ def optimize(
             tmask = jnp.asarray(target_mask, bool)
             if tmask.shape != (H, W):
                 raise ValueError(f"target_mask must have shape {(H, W)}; got {tmask.shape}")
-    if prior is not None:
+    if prior is not None:  # its shape is checked by `predict`
         prior = jnp.asarray(prior, params.label.dtype)
-        if prior.shape != (H, W):
-            raise ValueError(f"prior must have shape {(H, W)}; got {tuple(prior.shape)}")
     data = Data(
         centre=centre, others=others, offsets=offs, target=target, target_mask=tmask, prior=prior
     )
