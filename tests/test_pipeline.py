@@ -64,7 +64,7 @@ def test_demo_accuracy_on_every_view(demo_run):
     U, V = lf.grid
     per_view = [depth_metrics(d[r, c], gt[r, c], gtm[r, c]) for r in range(U) for c in range(V)]
     worst = max(m["mse_x100"] for m in per_view)
-    assert worst < 12.0, worst
+    assert worst <= 0.5, worst  # the issue target; measured 0.479 (mean of views 0.349)
     assert np.mean([m["badpix_0.07"] for m in per_view]) < 14.0
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["view_consistency"] < 0.02

@@ -51,10 +51,14 @@ class ReconstructConfig(eqx.Module):
         epi_photo_sigma: colour scale (RGB) of the photometric confidence of reprojected
             pixels (`photometric_confidence`), which multiplies ``epi_data_weight``; large =
             off.
-        epi_hole_weight: weight of the background prior in reprojection holes (disoccluded
-            pixels take the farther side). Scene-dependent: on the synthetic default scene
-            (9x9x160²) 10 rather than 1 cut the worst per-view MSE×100 from 2.4 to 1.7 (100:
-            1.4); on a 5x5x64² synthetic scene it raised it from 1.8 to 2.3 (100: 2.9).
+        epi_hole_weight: weight, in the angular inpainting, of the background prior in
+            reprojection holes (disoccluded pixels take the farther side along the EPI's
+            spatial axis). On the synthetic default scene (9x9x160², with the other defaults)
+            3, 10 and 30 give a worst per-view MSE×100 within 0.02 of each other; 1 is worse.
+        epi_min_confidence: a reprojected pixel (off the centre row) whose photometric
+            confidence is at most this counts as a hole in the angular inpainting: a value
+            whose colour does not match was carried across a disocclusion (a foreground value
+            spilled onto the background). 0 = every landed pixel is data (the thesis).
         epi_line_scale: multiplier of ``λ_e`` on EPI-line pixels (eq 6.8; thesis 1).
         epi_line_floor: minimum line weight (so that lines with ``λ_e ≈ 0`` still guide).
         epi_occlusion_tol: an EPI-line pixel is dropped where the reprojected disparity is
@@ -74,6 +78,11 @@ class ReconstructConfig(eqx.Module):
         select_margin: colour-cost advantage the candidate needs there (L1 colour units).
         fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
         fill_data_weight: data weight of the reprojected pixels in that solve.
+        fill_hole_weight: weight, in that solve, of the background fill
+            (`background_fill`) on holes: large = holes take the farther neighbouring surface,
+            small = the colour-guided smoothness spreads the neighbours into them.
+        fill_min_confidence: a merged pixel of an off-cross-hair view whose photometric
+            confidence is at most this counts as a hole (0 = only pixels nothing landed on).
         upsample: solve the centre problem on an ``upsample×`` grid (1 or 2) and average
             back (sub-pixel label placement).
         colour_space: ``"lab"`` (CIELAB / 100) or ``"rgb"`` guide for the smoothness terms.
@@ -96,9 +105,16 @@ class ReconstructConfig(eqx.Module):
         matte_sigma: distance scale of its colour means, pixels.
         select_aggregate: radius of the colour-weighted cost aggregation of `select_centre`.
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
-            (nearest valid farther value along the row) for off-cross-hair views.
+            (`background_fill` alone: the farthest of the nearest valid values left, right,
+            above and below) for off-cross-hair views.
         merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
             off-cross-hair view) or ``"mean"`` (the thesis' plain mean).
+        cross_hair_fill: in every cross-hair view but the centre, the holes of the
+            projection (as counted by ``epi_min_confidence``) take the farther of the
+            inpainted value and the 2-D `background_fill` of the view (nearest valid value
+            left, right, above and below). The EPI inpainting sees one image row or column
+            only: a disoccluded patch flanked along it by two nearer surfaces gets their
+            values there, while the background it belongs to lies beside it in the view.
         crack_parallax: forwarded to `forward_project`.
         solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
         epi_solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
@@ -124,6 +140,7 @@ class ReconstructConfig(eqx.Module):
     epi_centre_weight: Array = eqx.field(converter=_f32, default=1000.0)
     epi_photo_sigma: Array = eqx.field(converter=_f32, default=0.1)
     epi_hole_weight: Array = eqx.field(converter=_f32, default=10.0)
+    epi_min_confidence: Array = eqx.field(converter=_f32, default=0.1)
     epi_line_scale: Array = eqx.field(converter=_f32, default=1.0)
     epi_line_floor: Array = eqx.field(converter=_f32, default=0.1)
     epi_occlusion_tol: Array = eqx.field(converter=_f32, default=0.1)
@@ -138,6 +155,8 @@ class ReconstructConfig(eqx.Module):
     select_margin: Array = eqx.field(converter=_f32, default=0.0)
     fill_c: Array = eqx.field(converter=_f32, default=1.0)
     fill_data_weight: Array = eqx.field(converter=_f32, default=1000.0)
+    fill_hole_weight: Array = eqx.field(converter=_f32, default=1000.0)
+    fill_min_confidence: Array = eqx.field(converter=_f32, default=0.5)
     upsample: int = eqx.field(static=True, default=1)
     colour_space: str = eqx.field(static=True, default="lab")
     sharpen: bool = eqx.field(static=True, default=True)
@@ -155,6 +174,7 @@ class ReconstructConfig(eqx.Module):
     select_aggregate: int = eqx.field(static=True, default=3)
     hole_fill: str = eqx.field(static=True, default="solve")
     merge: str = eqx.field(static=True, default="photo")
+    cross_hair_fill: bool = eqx.field(static=True, default=True)
     crack_parallax: float = eqx.field(static=True, default=0.5)
     solver: SolverConfig = SolverConfig()
     epi_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
@@ -175,6 +195,9 @@ class ReconstructConfig(eqx.Module):
             "epi_c",
             "fill_c",
             "fill_data_weight",
+            "fill_hole_weight",
+            "fill_min_confidence",
+            "epi_min_confidence",
             "refine_jump",
             "refine_margin",
             "matte_jump",

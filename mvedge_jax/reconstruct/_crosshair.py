@@ -171,7 +171,9 @@ def inpaint_epis(
         line_weight, line_label: ``(S, A, L)`` from `rasterise_lines`.
         config: `ReconstructConfig`.
         confidence: optional ``(S, A, L)`` factor in ``[0, 1]`` on the reprojection weight
-            (`photometric_confidence`); the centre row is never down-weighted.
+            (`photometric_confidence`); the centre row is never down-weighted. Pixels off
+            the centre row with confidence at most ``config.epi_min_confidence`` count as
+            holes (a value carried across a disocclusion).
 
     Returns:
         ``(S, A, L)`` inpainted disparity.
@@ -180,13 +182,16 @@ def inpaint_epis(
         Thesis Sec. 6.1, "Angular Inpainting", eqs 6.4–6.8.
     """
     S, A, L = projected.shape
+    is_centre = (jnp.arange(A) == A // 2)[None, :, None]
+    if confidence is not None:
+        # A value whose colour does not match was carried across a disocclusion: a hole.
+        valid = valid & (is_centre | (confidence > config.epi_min_confidence))
     occluded = valid & (projected > line_label + config.epi_occlusion_tol)
     lw = jnp.where(occluded, 0.0, line_weight)
     # Reprojected pixels; the centre row (the view the map was estimated in) can be pinned.
     row_w = jnp.where(jnp.arange(A) == A // 2, config.epi_centre_weight, config.epi_data_weight)
     cw = jnp.where(valid, row_w[None, :, None], 0.0)
     if confidence is not None:
-        is_centre = (jnp.arange(A) == A // 2)[None, :, None]
         cw = cw * jnp.where(is_centre, 1.0, confidence)
     # Holes are disocclusions: prior = the farther of the nearest valid values along the
     # spatial axis (the background), weight epi_hole_weight.

@@ -35,7 +35,9 @@ def boundary_matte(
     (``spatial_sigma`` pixels) and by ``impure_weight`` for pixels that lie on a discontinuity
     themselves (mixed colours). ``α`` is the projection of ``c − B`` on ``F − B``. A pixel with
     ``α > 1/2`` keeps its value when it is foreground and takes ``D_F`` otherwise;
-    ``α ≤ 1/2`` likewise with the background. Unchanged: pixels off every discontinuity,
+    ``α ≤ 1/2`` likewise with the background, in both cases only if one of the pixel's 8
+    neighbours is on the chosen side (where three surfaces meet, the window's mean
+    background can resemble the foreground colour). Unchanged: pixels off every discontinuity,
     pixels whose ``F`` and ``B`` differ by less than ``min_separation`` (guide units) or
     whose window lacks one of the two sides, and near-ties ``|α − 1/2| ≤ 10⁻³``. One pass;
     jit/vmap-able. Not differentiable in the side chosen (a selection); the output is
@@ -115,5 +117,8 @@ def boundary_matte(
     is_fg = d > mid
     d_f = df / jnp.maximum(wf, tiny)
     d_b = db / jnp.maximum(wb, tiny)
+    # A pixel only joins a side that one of its 8 neighbours is on: where three surfaces
+    # meet, the mean background of the window can look like the foreground's colour.
+    decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
     new = jnp.where(alpha > 0.5, jnp.where(is_fg, d, d_f), jnp.where(is_fg, d_b, d))
     return jnp.where(decide, new, d)

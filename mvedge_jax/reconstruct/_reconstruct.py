@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
@@ -127,16 +128,28 @@ def merge_reprojections(
 
 
 def _fill_view(values, conf, image, config: ReconstructConfig):
-    valid = conf > 0
+    # A merged value whose colour matches poorly was carried across a disocclusion: a hole.
+    valid = conf > config.fill_min_confidence
     filled = background_fill(values, valid)
     if config.hole_fill == "background":
         return filled
-    lam = config.fill_data_weight * conf + jnp.where(valid, 0.0, config.epi_hole_weight)
+    lam = jnp.where(valid, config.fill_data_weight * conf, config.fill_hole_weight)
     guide = colour_guide(image, config.colour_space)
     wx, wy = guide_edge_weights(guide, scale=config.fill_c, eps=config.epi_eps)
     solved = solve_poisson(lam, filled, wx, wy, x0=filled, config=config.fill_solver).x
     # A view missing from a partial grid (all zero) gives no guide: keep the background fill.
     return jnp.where(jnp.max(image) > 0, solved, filled)
+
+
+def _cross_hair_fill(maps, valid, conf, centre: int, config: ReconstructConfig):
+    """``config.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
+    projection's ``valid`` and photometric confidence; entry ``centre`` is kept."""
+
+    def one(m, v, c):
+        ok = v & (c > config.epi_min_confidence)
+        return jnp.where(ok, m, jnp.minimum(m, background_fill(m, ok)))
+
+    return jax.vmap(one)(maps, valid, conf).at[centre].set(maps[centre])
 
 
 def _cross_hair_views(views: Array) -> tuple[Array, Array]:
@@ -358,6 +371,9 @@ def _propagate(
     )
     cross_h = jnp.transpose(eh, (1, 0, 2))  # (V, H, W)
     cross_v = jnp.transpose(ev, (1, 2, 0))  # (U, H, W)
+    if config.cross_hair_fill:
+        cross_h = _cross_hair_fill(cross_h, vh, ch, cc, config)
+        cross_v = _cross_hair_fill(cross_v, vv, cv, rc, config)
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
     disparity = jnp.zeros((U, V, H, W), jnp.float32)
     disparity = disparity.at[rc, :].set(cross_h)
@@ -408,10 +424,14 @@ def propagate(
        ``epi_data_weight`` on reprojected pixels (times their photometric confidence),
        ``λ_e`` on the rasterised EPI lines of all edge points (including points not visible
        in the centre view), smoothness ``epi_c / (|∇I_EPI| + epi_eps)``; one batched
-       `solve_poisson` per direction.
+       `solve_poisson` per direction. Reprojected pixels whose colour does not match
+       (photometric confidence ≤ ``epi_min_confidence``) count as holes. With
+       ``config.cross_hair_fill``, the holes of each cross-hair view then take the farther of
+       their inpainted value and the view's 2-D `background_fill`.
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
-       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
+       ``merge="photo"``); holes and pixels of confidence ≤ ``fill_min_confidence`` filled
+       (``config.hole_fill``).
     4. With ``config.matte_views``: `boundary_matte` of every view but the centre (reprojected
        boundaries are only pixel-accurate).
 
@@ -469,6 +489,9 @@ def reconstruct(
        ``epi_data_weight`` on reprojected pixels, ``λ_e`` on the rasterised EPI lines of all
        edge points (including points not visible in the centre view), smoothness
        ``epi_c / (|∇I_EPI| + epi_eps)``; one batched `solve_poisson` per direction.
+       Reprojected pixels whose colour does not match count as holes; with
+       ``config.cross_hair_fill`` the holes of each cross-hair view take the farther of the
+       inpainted value and the view's 2-D `background_fill`.
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).

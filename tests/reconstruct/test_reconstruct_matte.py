@@ -89,3 +89,28 @@ def test_matte_rejects_bad_input():
         ReconstructConfig(matte_radius=0)
     with pytest.raises(ValueError, match="matte_jump"):
         ReconstructConfig(matte_jump=-1.0)
+
+
+def test_matte_needs_a_neighbour_on_the_chosen_side():
+    """Three surfaces: a horizontal edge between a middle surface (top) and a far wall
+    (bottom), and a near bar to the right. Pixels on the middle/wall edge whose colour
+    matches the bar's (as a mixture of two other colours can) would join the bar by their
+    colour alone; two pixels from the bar (inside the 5x5 window, not among the 8
+    neighbours) they keep their value, next to the bar they may join it."""
+    H, W = 12, 16
+    mid_c, wall_c = np.array([0.9, 0.1, 0.1]), np.array([0.1, 0.1, 0.9])
+    bar_c = np.array([0.5, 0.4, 0.5])
+    d = np.full((H, W), -1.2, np.float32)
+    d[:6] = -0.3
+    d[:, 10:] = 1.35  # the bar
+    img = np.empty((H, W, 3), np.float32)
+    img[:6], img[6:] = mid_c, wall_c
+    img[6] = bar_c  # the edge row
+    img[:, 10:] = bar_c
+    out = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img)))
+    # Column 8: the bar (column 10) is in the window but not a neighbour.
+    assert out[6, 8] == d[6, 8]
+    # Column 9 touches the bar and has its colour: it joins the bar.
+    assert out[6, 9] > 1.0
+    # Off the edge row nothing changes left of the bar.
+    np.testing.assert_array_equal(out[:6, :9], d[:6, :9])
