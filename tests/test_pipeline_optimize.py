@@ -77,7 +77,8 @@ def test_optimize_merges_with_the_initial_map(api_run):
     assert 0.0 < info["selected_fraction"] < 1.0
     assert np.mean(took) == pytest.approx(info["selected_fraction"], abs=0.01)
     # only values that differ by more than the minimum change were taken
-    assert np.all(np.abs(sharp - initial)[took] > 0.02 - 1e-6)
+    min_change = float(PipelineConfig().reconstruct.select_min_change)
+    assert np.all(np.abs(sharp - initial)[took] > min_change - 1e-6)
 
 
 def test_residual_diffusion_starts_from_the_initial_map(api_run):

@@ -151,7 +151,7 @@ class ReconstructConfig(eqx.Module):
     matte_jump: Array = eqx.field(converter=_f32, default=0.2)
     matte_min_separation: Array = eqx.field(converter=_f32, default=0.1)
     matte_impure_weight: Array = eqx.field(converter=_f32, default=0.05)
-    select_min_change: Array = eqx.field(converter=_f32, default=0.02)
+    select_min_change: Array = eqx.field(converter=_f32, default=0.0)
     select_margin: Array = eqx.field(converter=_f32, default=0.0)
     fill_c: Array = eqx.field(converter=_f32, default=1.0)
     fill_data_weight: Array = eqx.field(converter=_f32, default=1000.0)

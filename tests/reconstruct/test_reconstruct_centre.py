@@ -171,6 +171,9 @@ def test_centre_bad_input(small_scene):
         dict(hole_fill="none"),
         dict(wmf_radius=0),
         dict(epi_c=float("nan")),
+        dict(fill_min_confidence=-0.1),
+        dict(epi_min_confidence=-0.1),
+        dict(fill_hole_weight=-1.0),
     ],
 )
 def test_config_validation(kwargs):
