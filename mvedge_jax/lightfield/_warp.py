@@ -3,7 +3,7 @@
 Two directions:
 
 * `backward_warp` — pull a source view into the target view's pixel grid using the target's
-  disparity (bilinear, differentiable).
+  disparity (bilinear, differentiable); `backward_warp_planar` for channels-first images.
 * `forward_project` — push a source view's disparity map into another view's pixel grid
   (nearest pixel, z-buffered; used for reprojection, view consistency and tests).
 """
@@ -69,19 +69,24 @@ def backward_warp(
     return _backward_warp(image, disparity, dr, dc)
 
 
-@jax.jit
-def _backward_warp(image, disparity, dr, dc):
-    H, W = image.shape[:2]
-    dtype = jnp.result_type(image.dtype, disparity.dtype)
+def _sample_coords(disparity: Array, dr: Array, dc: Array, dtype):
+    """Top-left pixel ``(y0, x0)`` (int32) and bilinear fractions ``(fy, fx)`` of the source
+    sample ``(x - dc d, y - dr d)`` of every target pixel, clamped to the image."""
+    H, W = disparity.shape
     ys, xs = jnp.meshgrid(jnp.arange(H, dtype=dtype), jnp.arange(W, dtype=dtype), indexing="ij")
     sx = jnp.clip(xs - dc.astype(dtype) * disparity, 0.0, W - 1)
     sy = jnp.clip(ys - dr.astype(dtype) * disparity, 0.0, H - 1)
     x0f = jnp.clip(jnp.floor(sx), 0, max(W - 2, 0))
     y0f = jnp.clip(jnp.floor(sy), 0, max(H - 2, 0))
-    fx = sx - x0f  # in [0, 1]; == 1 only at the last column
-    fy = sy - y0f
-    x0 = x0f.astype(jnp.int32)
-    y0 = y0f.astype(jnp.int32)
+    # fx in [0, 1]; == 1 only at the last column
+    return y0f.astype(jnp.int32), x0f.astype(jnp.int32), sy - y0f, sx - x0f
+
+
+@jax.jit
+def _backward_warp(image, disparity, dr, dc):
+    H, W = image.shape[:2]
+    dtype = jnp.result_type(image.dtype, disparity.dtype)
+    y0, x0, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
     x1 = jnp.minimum(x0 + 1, W - 1)
     y1 = jnp.minimum(y0 + 1, H - 1)
     img = image.astype(dtype)
@@ -91,6 +96,70 @@ def _backward_warp(image, disparity, dr, dc):
     top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
     bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
     return (top * (1 - fy) + bot * fy).astype(image.dtype)
+
+
+def backward_warp_planar(
+    planes: Float[ArrayLike, "C H W"],
+    disparity: Float[ArrayLike, "H W"],
+    offset: ArrayLike,
+) -> Float[Array, "C H W"]:
+    """`backward_warp` of a channels-first image: the same values, faster where many views
+    are warped and compared.
+
+    XLA on the CPU gathers from a channels-last ``(H, W, C)`` array slowly once the gather is
+    fused with what consumes it: 17 views warped and compared with a reference took 435 ms
+    channels-last against 165 ms channels-first (512², 2-core CPU). Transpose the views once
+    (``jnp.moveaxis(views, -1, -3)``) and warp the planes.
+
+    Args:
+        planes: ``(C, H, W)`` float source view, channels first, at angular offset
+            ``offset = (dr, dc)`` (view steps) from the target view.
+        disparity: ``(H, W)`` float disparity of the TARGET view, pixels per view step.
+        offset: ``(2,)`` ``(dr, dc)`` = (source row - target row, source col - target col).
+
+    Returns:
+        ``(C, H, W)`` resampled planes, dtype of ``planes``.
+
+    Raises:
+        ValueError: if ``planes`` is not 3-D, ``disparity`` is not ``(H, W)`` of the planes,
+            or ``offset`` is not a pair.
+
+    References:
+        Thesis Sec. 6.2, Sec. 7.1 (eq 7.15).
+    """
+    planes = jnp.asarray(planes)
+    disparity = jnp.asarray(disparity)
+    if planes.ndim != 3:
+        raise ValueError(f"planes must have shape (C, H, W); got {planes.shape}")
+    if disparity.shape != planes.shape[1:]:
+        raise ValueError(
+            f"disparity must have the planes' spatial shape {planes.shape[1:]}; "
+            f"got {disparity.shape}"
+        )
+    dr, dc = _check_offset(offset)
+    return _backward_warp_planar(planes, disparity, dr, dc)
+
+
+@jax.jit
+def _backward_warp_planar(planes, disparity, dr, dc):
+    C, H, W = planes.shape
+    dtype = jnp.result_type(planes.dtype, disparity.dtype)
+    y0, x0, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
+    i00 = y0 * W + x0
+    i01 = y0 * W + jnp.minimum(x0 + 1, W - 1)
+    i10 = jnp.minimum(y0 + 1, H - 1) * W + x0
+    i11 = jnp.minimum(y0 + 1, H - 1) * W + jnp.minimum(x0 + 1, W - 1)
+    out = []
+    for c in range(C):
+        p = planes[c].astype(dtype).reshape(-1)
+
+        def at(i, p=p):
+            return jnp.take(p, i, mode="clip")
+
+        top = at(i00) * (1 - fx) + at(i01) * fx
+        bot = at(i10) * (1 - fx) + at(i11) * fx
+        out.append(top * (1 - fy) + bot * fy)
+    return jnp.stack(out).astype(planes.dtype)
 
 
 def forward_project(

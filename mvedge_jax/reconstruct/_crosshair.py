@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..edges import EdgeSet
-from ..lightfield import backward_warp, forward_project
+from ..lightfield import backward_warp_planar, forward_project
 from ..solve import guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 
@@ -77,9 +77,11 @@ def photometric_confidence(
         ``(K, H, W)`` confidence in ``[0, 1]``.
     """
 
+    src = jnp.moveaxis(source, -1, 0)  # channels first: see `backward_warp_planar`
+
     def one(p, off, img):
-        back = backward_warp(source, p, -off)
-        dist2 = jnp.sum((back - img) ** 2, axis=-1)
+        back = backward_warp_planar(src, p, -off)
+        dist2 = sum((back[c] - img[..., c]) ** 2 for c in range(back.shape[0]))
         return jnp.exp(-dist2 / (sigma * sigma))
 
     return jax.vmap(one)(projected, offsets, targets)

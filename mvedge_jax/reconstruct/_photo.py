@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float
 
-from ..lightfield import backward_warp
+from ..lightfield import backward_warp_planar
 
 
 def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
@@ -66,19 +66,28 @@ def photo_cost(
     suppresses chance matches of single pixels.
     """
 
+    planes = jnp.moveaxis(views, -1, -3)
+    ref_planes = jnp.moveaxis(reference, -1, -3)
+    return _photo_cost_planar(candidate, reference, ref_planes, planes, offsets, aggregate, sigma)
+
+
+def _photo_cost_planar(candidate, reference, ref_planes, planes, offsets, aggregate, sigma):
+    """`photo_cost` with the views channels first (``planes (K, C, H, W)``,
+    ``ref_planes (C, H, W)``): see `backward_warp_planar`."""
     H, W = candidate.shape
     ys, xs = jnp.meshgrid(
         jnp.arange(H, dtype=candidate.dtype), jnp.arange(W, dtype=candidate.dtype), indexing="ij"
     )
 
     def diff(view, off):
-        w = backward_warp(view, candidate, off)
+        w = backward_warp_planar(view, candidate, off)
         sx = xs - off[1] * candidate
         sy = ys - off[0] * candidate
         inside = (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
-        return jnp.sum(jnp.abs(w - reference), axis=-1), inside
+        # A sum of channel slices: XLA's CPU reduction over a short axis is slow.
+        return sum(jnp.abs(w[c] - ref_planes[c]) for c in range(w.shape[0])), inside
 
-    costs, inside = jax.vmap(diff)(views, offsets)  # (K, H, W) each
+    costs, inside = jax.vmap(diff)(planes, offsets)  # (K, H, W) each
     dr, dc = offsets[:, 0], offsets[:, 1]
     groups = jnp.stack([dc < 0, dc > 0, dr < 0, dr > 0]).astype(costs.dtype)  # (4, K)
     m = inside.astype(costs.dtype)
@@ -130,10 +139,16 @@ def photo_refine(
         ``(H, W)`` refined disparity.
     """
 
+    planes = jnp.moveaxis(views, -1, -3)
+    ref_planes = jnp.moveaxis(reference, -1, -3)
+
     def one(_, d):
         lo, hi = _window_extrema(d, radius)
         band = (hi - lo) > jump
-        cost = lambda c: photo_cost(c, reference, views, offsets, aggregate=aggregate, sigma=sigma)
+
+        def cost(c):
+            return _photo_cost_planar(c, reference, ref_planes, planes, offsets, aggregate, sigma)
+
         c_own, c_hi, c_lo = cost(d), cost(hi), cost(lo)
         best = jnp.where(c_hi <= c_lo, hi, lo)
         c_best = jnp.minimum(c_hi, c_lo)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from mvedge_jax.lightfield import backward_warp, forward_project
+from mvedge_jax.lightfield import backward_warp, backward_warp_planar, forward_project
 
 H, W = 24, 32
 
@@ -91,6 +91,49 @@ def test_backward_warp_gradients(x64, key):
         np.full((8, 9), 0.4)
     )
     np.testing.assert_allclose(np.asarray(g)[2:6, 3:7], -2.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("shape", [(H, W), (1, W), (H, 1)])
+def test_backward_warp_planar_matches_channels_last(key, shape):
+    # Same samples as `backward_warp`, border clamping and degenerate 1-px sizes included.
+    k1, k2 = jax.random.split(key)
+    img = jax.random.uniform(k1, (*shape, 3))
+    d = 3.0 * jax.random.normal(k2, shape)  # many samples leave the image: clamped
+    for off in [(0.0, 1.0), (-2.0, 0.5), (1.5, -3.0)]:
+        planar = backward_warp_planar(jnp.moveaxis(img, -1, 0), d, off)
+        assert planar.shape == (3, *shape) and planar.dtype == jnp.float32
+        np.testing.assert_allclose(
+            jnp.moveaxis(planar, 0, -1), backward_warp(img, d, off), rtol=1e-6, atol=1e-6
+        )
+
+
+def test_backward_warp_planar_bad_shapes_and_vmap(key):
+    with pytest.raises(ValueError, match=r"planes must have shape \(C, H, W\)"):
+        backward_warp_planar(np.zeros((H, W)), np.zeros((H, W)), (0.0, 1.0))
+    with pytest.raises(ValueError, match="spatial shape"):
+        backward_warp_planar(np.zeros((3, H, W)), np.zeros((H, W + 1)), (0.0, 1.0))
+    with pytest.raises(ValueError, match="offset"):
+        backward_warp_planar(np.zeros((3, H, W)), np.zeros((H, W)), (1.0,))
+    planes = jax.random.uniform(key, (2, H, W))
+    d = 0.7 * jax.random.uniform(key, (H, W))
+    offs = jnp.array([[0.0, 1.0], [-2.0, 3.0]])
+    batched = jax.jit(jax.vmap(backward_warp_planar, in_axes=(None, None, 0)))(planes, d, offs)
+    for i in range(2):
+        np.testing.assert_allclose(batched[i], backward_warp_planar(planes, d, offs[i]))
+
+
+def test_backward_warp_planar_gradients(x64, key):
+    k1, k2 = jax.random.split(key)
+    planes = np.asarray(jax.random.uniform(k1, (2, 8, 9), dtype=jnp.float64))
+    d = np.asarray(0.3 + 0.2 * jax.random.uniform(k2, (8, 9), dtype=jnp.float64))
+    off = np.array([0.5, 1.7])
+    check_grads(
+        lambda p, dd: backward_warp_planar(p, dd, off),
+        (planes, d),
+        order=1,
+        modes=("rev",),
+        eps=1e-6,
+    )
 
 
 # ---- forward_project -------------------------------------------------------------------------
