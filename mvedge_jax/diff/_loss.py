@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..lightfield import backward_warp, forward_project
@@ -111,11 +112,17 @@ def occlusion_mask(
 
 
 def _box3(a: Array) -> Array:
-    """3×3 box mean with edge replication over the two leading axes of ``(H, W, C)``."""
+    """3×3 box mean with edge replication over the two leading axes of ``(H, W, C)``.
+
+    Two separable ``reduce_window`` sums: their backward pass is again a windowed sum. The
+    sum of nine shifted slices it replaces made XLA's CPU backend recompute the SSIM
+    expression in the backward pass of each slice (the self-supervised value_and_grad over
+    16 views at 512²: 2.5 s against 0.85 s).
+    """
     p = jnp.pad(a, ((1, 1), (1, 1), (0, 0)), mode="edge")
-    H, W = a.shape[:2]
-    s = sum(p[i : i + H, j : j + W] for i in range(3) for j in range(3))
-    return s / 9.0
+    zero = np.zeros((), a.dtype)  # concrete, so that JAX picks the differentiable window sum
+    h = jax.lax.reduce_window(p, zero, jax.lax.add, (1, 3, 1), (1, 1, 1), "VALID")
+    return jax.lax.reduce_window(h, zero, jax.lax.add, (3, 1, 1), (1, 1, 1), "VALID") / 9.0
 
 
 def ssim_map(a: Float[ArrayLike, "H W C"], b: Float[ArrayLike, "H W C"]) -> Array:

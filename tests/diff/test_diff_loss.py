@@ -71,6 +71,25 @@ def test_ssim_and_smoothness():
     assert float(edge_aware_smoothness(step.T, img)) > 0.05
 
 
+def test_ssim_matches_reference_and_gradients(x64):
+    # Reference: 3x3 means with edge replication (scipy's uniform_filter, mode "nearest").
+    from scipy.ndimage import uniform_filter
+
+    rng = np.random.default_rng(7)
+    a, b = rng.uniform(0, 1, (2, 9, 11, 3))
+
+    def mean3(x):
+        return uniform_filter(x, size=(3, 3, 1), mode="nearest")
+
+    mu_a, mu_b = mean3(a), mean3(b)
+    va, vb = mean3(a * a) - mu_a**2, mean3(b * b) - mu_b**2
+    cov = mean3(a * b) - mu_a * mu_b
+    c1, c2 = 0.01**2, 0.03**2
+    ref = (2 * mu_a * mu_b + c1) * (2 * cov + c2) / ((mu_a**2 + mu_b**2 + c1) * (va + vb + c2))
+    np.testing.assert_allclose(np.asarray(ssim_map(a, b)), ref, rtol=1e-9, atol=1e-12)
+    check_grads(lambda x, y: ssim_map(x, y), (a, b), order=1, modes=("rev",), eps=1e-6)
+
+
 def test_supervised_loss_and_bad_input():
     d = jnp.zeros((4, 5))
     t = jnp.ones((4, 5))
