@@ -241,19 +241,21 @@ def test_demo_optimize(tmp_path):
     assert "before optimisation" in res.output
 
 
-def _centre_before_after(folder):
-    """Ch. 6 and ``--optimize`` centre-view metrics of a full-resolution GT scene, and the
-    optimisation info."""
+def _centre_before_after(folder, *configs):
+    """Ch. 6 centre-view metrics of a full-resolution GT scene, and ``(metrics, info)`` of
+    ``--optimize`` from that one Ch. 6 result for each config (default: the default)."""
     from mvedge_jax.io import load_light_field
 
     lf = load_light_field(folder)
     res = estimate_disparity(lf)
-    new, info = optimize_disparity(lf, res)
     rc, cc = lf.centre_index
     gt, gtm = np.asarray(lf.centre_gt), np.asarray(lf.centre_gt_mask)
     before = depth_metrics(np.asarray(res.disparity[rc, cc]), gt, gtm)
-    after = depth_metrics(np.asarray(new.disparity[rc, cc]), gt, gtm)
-    return before, after, info
+    runs = []
+    for config in configs or (None,):
+        new, info = optimize_disparity(lf, res, config)
+        runs.append((depth_metrics(np.asarray(new.disparity[rc, cc]), gt, gtm), info))
+    return before, runs
 
 
 @pytest.mark.slow
@@ -261,7 +263,7 @@ def test_optimize_antinous_accuracy(data_dir):
     """Full-resolution antinous with the default schedule (~9 min on 2 cores). Measured
     (session 5, residual diffusion and merge): centre MSE×100 8.10 → 6.50, BadPix(0.07)
     16.4 → 12.8, Q25×100 0.98 → 0.83."""
-    before, after, info = _centre_before_after(data_dir / "hci4d" / "additional" / "antinous")
+    before, [(after, info)] = _centre_before_after(data_dir / "hci4d" / "additional" / "antinous")
     assert info["loss_history"][-1] < info["loss_history"][0]
     assert after["badpix_0.07"] < min(before["badpix_0.07"] - 2.0, 14.0), (before, after)
     assert after["mse_x100"] < 7.2, after
@@ -269,11 +271,24 @@ def test_optimize_antinous_accuracy(data_dir):
 
 @pytest.mark.slow
 def test_optimize_backgammon_target(data_dir):
-    """Full-resolution backgammon, default schedule (~10 min on 2 cores): the Ch. 7 target,
-    BadPix(0.07) at least 25% below the Ch. 6 result with MSE×100 at most 10% worse.
-    Measured (session 5, residual diffusion and merge): MSE×100 1.311 → 1.293,
-    BadPix(0.07) 1.756 → 1.240 (−29.4%), BadPix(0.01) 13.9 → 12.3."""
-    before, after, _ = _centre_before_after(data_dir / "hci4d" / "stratified" / "backgammon")
+    """Full-resolution backgammon (~7 min on 2 cores for the two runs).
+
+    Default (every pixel may take the optimised value, ``select_min_change = 0``, since
+    session 6): the Ch. 7 target, BadPix(0.07) at least 25% below the Ch. 6 result with
+    MSE×100 at most 10% worse. Measured (session 7): MSE×100 1.297 → 1.256, BadPix(0.07)
+    1.744 → 1.241 (−28.8%); the price is fine accuracy, BadPix(0.01) 13.9 → 18.7.
+    ``select_min_change = 0.02`` (the optimised value only where it moves by more than
+    that) keeps the fine accuracy of Ch. 6 instead, as the README says: MSE×100 1.255,
+    BadPix(0.07) 1.243, BadPix(0.01) 13.0 (session 7).
+    """
+    default = PipelineConfig()
+    fine = dataclasses.replace(
+        default, reconstruct=dataclasses.replace(default.reconstruct, select_min_change=0.02)
+    )
+    folder = data_dir / "hci4d" / "stratified" / "backgammon"
+    before, [(after, _), (after_fine, _)] = _centre_before_after(folder, default, fine)
     assert after["badpix_0.07"] <= 0.75 * before["badpix_0.07"], (before, after)
     assert after["mse_x100"] <= 1.10 * before["mse_x100"], (before, after)
-    assert after["badpix_0.01"] < before["badpix_0.01"], (before, after)
+    assert after["badpix_0.01"] < before["badpix_0.01"] + 6.0, (before, after)
+    assert after_fine["badpix_0.01"] < before["badpix_0.01"], (before, after_fine)
+    assert after_fine["badpix_0.07"] < before["badpix_0.07"], (before, after_fine)
