@@ -70,32 +70,36 @@ def backward_warp(
 
 
 def _sample_coords(disparity: Array, dr: Array, dc: Array, dtype):
-    """Top-left pixel ``(y0, x0)`` (int32) and bilinear fractions ``(fy, fx)`` of the source
-    sample ``(x - dc d, y - dr d)`` of every target pixel, clamped to the image."""
+    """The four source pixels of the bilinear sample ``(x - dc d, y - dr d)`` of every target
+    pixel, clamped to the image: ``(y0, x0, y1, x1)`` (int32) and the fractions ``(fy, fx)``."""
     H, W = disparity.shape
     ys, xs = jnp.meshgrid(jnp.arange(H, dtype=dtype), jnp.arange(W, dtype=dtype), indexing="ij")
     sx = jnp.clip(xs - dc.astype(dtype) * disparity, 0.0, W - 1)
     sy = jnp.clip(ys - dr.astype(dtype) * disparity, 0.0, H - 1)
     x0f = jnp.clip(jnp.floor(sx), 0, max(W - 2, 0))
     y0f = jnp.clip(jnp.floor(sy), 0, max(H - 2, 0))
+    y0, x0 = y0f.astype(jnp.int32), x0f.astype(jnp.int32)
     # fx in [0, 1]; == 1 only at the last column
-    return y0f.astype(jnp.int32), x0f.astype(jnp.int32), sy - y0f, sx - x0f
+    return y0, x0, jnp.minimum(y0 + 1, H - 1), jnp.minimum(x0 + 1, W - 1), sy - y0f, sx - x0f
+
+
+def _blend(v00, v01, v10, v11, fy, fx):
+    """Bilinear blend of the samples at ``(y0, x0), (y0, x1), (y1, x0), (y1, x1)``."""
+    top = v00 * (1 - fx) + v01 * fx
+    bot = v10 * (1 - fx) + v11 * fx
+    return top * (1 - fy) + bot * fy
 
 
 @jax.jit
 def _backward_warp(image, disparity, dr, dc):
-    H, W = image.shape[:2]
     dtype = jnp.result_type(image.dtype, disparity.dtype)
-    y0, x0, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
-    x1 = jnp.minimum(x0 + 1, W - 1)
-    y1 = jnp.minimum(y0 + 1, H - 1)
+    y0, x0, y1, x1, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
     img = image.astype(dtype)
     if img.ndim == 3:
         fx = fx[..., None]
         fy = fy[..., None]
-    top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
-    bot = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
-    return (top * (1 - fy) + bot * fy).astype(image.dtype)
+    out = _blend(img[y0, x0], img[y0, x1], img[y1, x0], img[y1, x1], fy, fx)
+    return out.astype(image.dtype)
 
 
 def backward_warp_planar(
@@ -142,23 +146,15 @@ def backward_warp_planar(
 
 @jax.jit
 def _backward_warp_planar(planes, disparity, dr, dc):
-    C, H, W = planes.shape
+    W = planes.shape[2]
     dtype = jnp.result_type(planes.dtype, disparity.dtype)
-    y0, x0, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
-    i00 = y0 * W + x0
-    i01 = y0 * W + jnp.minimum(x0 + 1, W - 1)
-    i10 = jnp.minimum(y0 + 1, H - 1) * W + x0
-    i11 = jnp.minimum(y0 + 1, H - 1) * W + jnp.minimum(x0 + 1, W - 1)
+    y0, x0, y1, x1, fy, fx = _sample_coords(disparity.astype(dtype), dr, dc, dtype)
+    # Flat indices into each plane: one 1-D gather per corner and channel.
+    corners = (y0 * W + x0, y0 * W + x1, y1 * W + x0, y1 * W + x1)
     out = []
-    for c in range(C):
+    for c in range(planes.shape[0]):
         p = planes[c].astype(dtype).reshape(-1)
-
-        def at(i, p=p):
-            return jnp.take(p, i, mode="clip")
-
-        top = at(i00) * (1 - fx) + at(i01) * fx
-        bot = at(i10) * (1 - fx) + at(i11) * fx
-        out.append(top * (1 - fy) + bot * fy)
+        out.append(_blend(*(jnp.take(p, i, mode="clip") for i in corners), fy, fx))
     return jnp.stack(out).astype(planes.dtype)
 
 

@@ -56,10 +56,10 @@ def photo_cost(
 ) -> Float[Array, "H W"]:
     """Occlusion-aware colour cost of a disparity hypothesis per pixel.
 
-    Each view is warped to the reference with the candidate disparity (`backward_warp`); the
-    L1 colour difference is averaged within four half-planes of view offsets (left ``dc < 0``,
-    right ``dc > 0``, up ``dr < 0``, down ``dr > 0``) over the views whose sample falls inside
-    the image, and the smallest half-plane mean is the cost: a point next to an occluder is
+    Each view is warped to the reference with the candidate disparity (`backward_warp`, done
+    channels first by `backward_warp_planar`); the L1 colour difference is averaged within
+    four half-planes of view offsets (left ``dc < 0``, right ``dc > 0``, up ``dr < 0``, down
+    ``dr > 0``) over the views whose sample falls inside the image, and the smallest half-plane mean is the cost: a point next to an occluder is
     visible from at least one side. ``inf`` where no view samples inside the image. With
     ``aggregate > 0`` the half-plane means are first averaged over a colour-weighted
     ``(2 aggregate + 1)²`` window (adaptive support weights, ``sigma`` in colour units), which
@@ -67,14 +67,14 @@ def photo_cost(
     """
 
     planes = jnp.moveaxis(views, -1, -3)
-    ref_planes = jnp.moveaxis(reference, -1, -3)
-    return _photo_cost_planar(candidate, reference, ref_planes, planes, offsets, aggregate, sigma)
+    return _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma)
 
 
-def _photo_cost_planar(candidate, reference, ref_planes, planes, offsets, aggregate, sigma):
-    """`photo_cost` with the views channels first (``planes (K, C, H, W)``,
-    ``ref_planes (C, H, W)``): see `backward_warp_planar`."""
+def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma):
+    """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
+    `backward_warp_planar`), so that callers looping over candidates transpose them once."""
     H, W = candidate.shape
+    ref_planes = jnp.moveaxis(reference, -1, -3)
     ys, xs = jnp.meshgrid(
         jnp.arange(H, dtype=candidate.dtype), jnp.arange(W, dtype=candidate.dtype), indexing="ij"
     )
@@ -140,14 +140,13 @@ def photo_refine(
     """
 
     planes = jnp.moveaxis(views, -1, -3)
-    ref_planes = jnp.moveaxis(reference, -1, -3)
 
     def one(_, d):
         lo, hi = _window_extrema(d, radius)
         band = (hi - lo) > jump
 
         def cost(c):
-            return _photo_cost_planar(c, reference, ref_planes, planes, offsets, aggregate, sigma)
+            return _photo_cost_planar(c, reference, planes, offsets, aggregate, sigma)
 
         c_own, c_hi, c_lo = cost(d), cost(hi), cost(lo)
         best = jnp.where(c_hi <= c_lo, hi, lo)
