@@ -166,6 +166,7 @@ def render(
     config: RenderConfig = _DEFAULT_RENDER,
     *,
     valid: Bool[ArrayLike, " N"] | None = None,
+    value: Float[ArrayLike, " N"] | None = None,
 ) -> RenderResult:
     """Render a point set into a label map S^Z and a weight map λ^Z with occlusion.
 
@@ -182,6 +183,9 @@ def render(
         shape: ``(H, W)`` of the output.
         config: `RenderConfig` (σ_S, σ_λ, p, σ_Z, ρ, tiles).
         valid: ``(N,)`` bool; invalid points are ignored. Default: all valid.
+        value: optional ``(N,)`` per-point quantity mixed into ``RenderResult.label`` in place
+            of the label, with the same weights (the label still sets the depth order and
+            the occlusion); `predict` uses it to splat the points' departures from a prior.
 
     Returns:
         A `RenderResult`; ``overflow`` counts points that did not fit some tile (those are
@@ -202,6 +206,12 @@ def render(
     log_weight = jnp.asarray(log_weight, dtype)
     valid = None if valid is None else jnp.asarray(valid, bool)
     check_points(position, label, log_weight, valid)
+    if value is None:
+        value = label
+    else:
+        value = jnp.asarray(value, dtype)
+        if value.shape != label.shape:
+            raise ValueError(f"value must have the labels' shape {label.shape}; got {value.shape}")
     H, W = check_shape(shape)
     T, r = config.tile_size, config.radius
     n_ty, n_tx = -(-H // T), -(-W // T)
@@ -210,7 +220,7 @@ def render(
         return RenderResult(label=zero, weight=zero, alpha=zero, overflow=jnp.zeros((), jnp.int32))
 
     x, y = position[:, 0], position[:, 1]
-    ok = jnp.all(jnp.isfinite(position), axis=1) & jnp.isfinite(label)
+    ok = jnp.all(jnp.isfinite(position), axis=1) & jnp.isfinite(label) & jnp.isfinite(value)
     if valid is not None:
         ok = ok & valid
     sx, sy, slab = (lax.stop_gradient(a) for a in (x, y, label))
@@ -225,7 +235,7 @@ def render(
     # gather the tile lists (n_tiles, C); empty slots point at index 0 and are masked
     used = table >= 0
     idx = jnp.maximum(table, 0)
-    tx_, ty_, tz, tw = x[idx], y[idx], label[idx], jnp.exp(-log_weight[idx])
+    tx_, ty_, tz, tw = x[idx], y[idx], value[idx], jnp.exp(-log_weight[idx])
     tiles = jnp.arange(n_ty * n_tx, dtype=jnp.int32)
     oy = ((tiles // n_tx) * T).astype(dtype)
     ox = ((tiles % n_tx) * T).astype(dtype)

@@ -232,3 +232,36 @@ def test_render_grad(x64):
         return jnp.sum(wts[0] * out.label + wts[1] * out.weight + wts[2] * out.alpha)
 
     check_grads(jax.jit(f), (pos, lab, R), order=1, modes=("rev",), eps=1e-6)
+
+
+def test_value_is_mixed_with_the_label_weights_and_keeps_the_depth_order():
+    # `value` replaces the label only in the mixed map: weights, opacity and the depth order
+    # stay the label's, so an affine function of the labels mixes to that function of S^Z.
+    pos = jnp.array([[5.0, 5.0], [6.2, 5.4], [9.5, 8.8], [3.1, 10.0]])
+    lab = jnp.array([1.0, -0.5, 2.0, 0.3])
+    base = _render_eager(pos, lab, jnp.zeros(4), (14, 13))
+    same = _render_eager(pos, lab, jnp.zeros(4), (14, 13), value=lab)
+    for a, b in ((base.label, same.label), (base.weight, same.weight), (base.alpha, same.alpha)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    aff = _render_eager(pos, lab, jnp.zeros(4), (14, 13), value=3.0 * lab - 1.0)
+    np.testing.assert_array_equal(np.asarray(aff.weight), np.asarray(base.weight))
+    has = np.asarray(base.weight) > 1e-6
+    np.testing.assert_allclose(
+        np.asarray(aff.label)[has], 3.0 * np.asarray(base.label)[has] - 1.0, rtol=1e-5, atol=1e-5
+    )
+    with pytest.raises(ValueError, match="value must have"):
+        _render_eager(pos, lab, jnp.zeros(4), (14, 13), value=jnp.zeros(3))
+
+
+def test_render_value_grad(x64):
+    pos = jnp.array([[4.3, 5.2], [5.6, 4.7], [9.7, 9.9]], jnp.float64)
+    lab = jnp.array([1.0, -0.5, 2.0], jnp.float64)
+    val = jnp.array([0.2, 0.1, -0.3], jnp.float64)
+    wts = jax.random.normal(jax.random.key(2), (14, 13), jnp.float64)
+    cfg = RenderConfig(tile_size=8, tile_levels=((8, 1.0),))
+
+    def f(pos, val):
+        out = _render_eager(pos, lab, jnp.zeros(3, jnp.float64), (14, 13), cfg, value=val)
+        return jnp.sum(wts * out.label)
+
+    check_grads(jax.jit(f), (pos, val), order=1, modes=("rev",), eps=1e-6)

@@ -154,7 +154,29 @@ def test_prior_keeps_the_slope_between_sparse_labels():
     # labels equal to the prior reproduce it exactly
     same = initial_params(pos, sample_bilinear(prior, pos), jnp.zeros((H, W, 3)), cfg)
     np.testing.assert_allclose(
-        np.asarray(_predict(same, cfg, prior=prior).disparity), np.asarray(prior), atol=0.05
+        np.asarray(_predict(same, cfg, prior=prior).disparity), np.asarray(prior), atol=1e-5
     )
     with pytest.raises(ValueError, match="prior must have shape"):
         predict(p, cfg, prior=jnp.zeros((H, W + 1)))
+
+
+def test_prior_with_a_depth_edge_is_reproduced_by_labels_equal_to_it():
+    # Points on both sides of a step of the prior, one pixel from it: their 7x7 splats reach
+    # across the step. Each point carries its departure from the prior under it (zero), so
+    # the map is the prior exactly; splatting the labels and subtracting the prior per pixel
+    # put the foreground's labels on the background beside the step (a halo of ~1 px·0.6).
+    H, W = 24, 24
+    prior = np.where(np.arange(W)[None, :] < 12, 0.2, 1.2) * np.ones((H, 1))
+    prior = jnp.asarray(prior, jnp.float32)
+    ys = np.arange(2.0, 22.0, 3.0)
+    pos = jnp.asarray([[x, y] for y in ys for x in (3.0, 10.6, 13.4, 20.0)], jnp.float32)
+    cfg = ModelConfig(label_weight=100.0)
+    p = initial_params(pos, sample_bilinear(prior, pos), jnp.zeros((H, W, 3)), cfg)
+    d = np.asarray(_predict(p, cfg, prior=prior).disparity)
+    np.testing.assert_allclose(d, np.asarray(prior), atol=1e-5)
+    # a departure of one point stays a local, smooth bump on top of the prior
+    moved = eqx.tree_at(lambda q: q.label, p, p.label.at[9].add(0.3))
+    bump = np.asarray(_predict(moved, cfg, prior=prior).disparity) - np.asarray(prior)
+    y9, x9 = int(round(float(pos[9, 1]))), int(round(float(pos[9, 0])))
+    assert bump[y9, x9] > 0.1
+    assert np.abs(bump).max() <= 0.3 + 1e-5 and bump.min() > -1e-5
