@@ -177,8 +177,13 @@ def sweep_full(views, edges, surface, base, names, grid, counter: CompileCounter
         n_comp.append(n1 - n0)
         t_comp.append(c1 - c0)
         maps.append(np.asarray(d))
-    return np.stack(maps), np.asarray(secs), np.asarray(n_comp), np.asarray(t_comp), \
-        run._cache_size()
+    return (
+        np.stack(maps),
+        np.asarray(secs),
+        np.asarray(n_comp),
+        np.asarray(t_comp),
+        run._cache_size(),
+    )
 
 
 def _log_axis(values: np.ndarray) -> bool:
@@ -228,9 +233,16 @@ def plot_sweep(path: Path, scene: str, stage: str, params, values, table, defaul
             mid = 0.5 * (np.nanmax(grid) + np.nanmin(grid))
             for i in range(k1):
                 for j in range(k2):
-                    ax.text(j, i, f"{grid[i, j]:.{digits}f}", ha="center", va="center",
-                            fontsize=8, color="black" if grid[i, j] > mid else "white",
-                            fontweight="bold" if (i, j) == best else "normal")
+                    ax.text(
+                        j,
+                        i,
+                        f"{grid[i, j]:.{digits}f}",
+                        ha="center",
+                        va="center",
+                        fontsize=8,
+                        color="black" if grid[i, j] > mid else "white",
+                        fontweight="bold" if (i, j) == best else "normal",
+                    )
         fig.suptitle(f"{title} (bold: best)")
         fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -251,8 +263,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--values2", help="values of the second parameter")
     ap.add_argument("--stage", choices=("centre", "full"), default="centre")
     ap.add_argument("--scale", type=float, default=None, help="spatial downscale in (0, 1]")
-    ap.add_argument("--batch-size", type=int, default=0,
-                    help="centre stage: lax.map batch size (0 = vmap over all values)")
+    ap.add_argument(
+        "--batch-size",
+        type=int,
+        default=0,
+        help="centre stage: lax.map batch size (0 = vmap over all values)",
+    )
     ap.add_argument("--out", default="sweep_out", help="folder of the PNG (default sweep_out/)")
     ap.add_argument("--json", help="also write the table as JSON here")
     ap.add_argument("--force", action="store_true", help="overwrite existing output files")
@@ -297,16 +313,20 @@ def main(argv: list[str] | None = None) -> int:
     U, V, H, W, _ = lf.views.shape
     rc, cc = U // 2, V // 2
     gt, gt_mask = np.asarray(lf.gt_disparity[rc, cc]), np.asarray(lf.gt_mask[rc, cc])
-    print(f"scene {lf.name}: {U}x{V} views of {H}x{W}, stage {args.stage}, "
-          f"sweep {' x '.join(f'{p}={v.tolist()}' for p, v in zip(params, values, strict=True))}")
+    print(
+        f"scene {lf.name}: {U}x{V} views of {H}x{W}, stage {args.stage}, "
+        f"sweep {' x '.join(f'{p}={v.tolist()}' for p, v in zip(params, values, strict=True))}"
+    )
 
     counter = CompileCounter().install()
     t0 = time.perf_counter()
     edges = detect_edges(lf)  # same defaults and key as `estimate_disparity`
     surface = jax.jit(surface_vectors)(edges, lf.centre_view)
     jax.block_until_ready(surface)
-    print(f"edges + surface once: {time.perf_counter() - t0:.1f}s (incl. compilation), "
-          f"{int(edges.valid.sum())} edge points")
+    print(
+        f"edges + surface once: {time.perf_counter() - t0:.1f}s (incl. compilation), "
+        f"{int(edges.valid.sum())} edge points"
+    )
     base = ReconstructConfig()
     defaults = [float(getattr(base, p)) for p in params]
 
@@ -316,31 +336,49 @@ def main(argv: list[str] | None = None) -> int:
     K = grid.shape[0]
     if args.stage == "centre":
         maps, t_compile, t_run = sweep_centre(
-            edges, surface, lf.centre_view, base, tuple(params), grid,
+            edges,
+            surface,
+            lf.centre_view,
+            base,
+            tuple(params),
+            grid,
             batch_size=args.batch_size or None,
         )
         n_after, _ = counter.snapshot()
         secs = np.full(K, t_run / K)
         how = f"lax.map(batch_size={args.batch_size})" if args.batch_size else "vmap"
         names = counter.names[n_before:n_after]
-        print(f"centre stage: {n_after - n_before} XLA compilation(s) for all {K} values ({how}, "
-              f"ahead of time: {names}): compile {t_compile:.1f}s, run {t_run:.1f}s for {K} "
-              f"values ({t_run / K:.2f}s each)")
-        evidence = {"mode": how, "compilations": n_after - n_before, "compiled": names,
-                    "compile_seconds": t_compile, "run_seconds": t_run}
+        print(
+            f"centre stage: {n_after - n_before} XLA compilation(s) for all {K} values ({how}, "
+            f"ahead of time: {names}): compile {t_compile:.1f}s, run {t_run:.1f}s for {K} "
+            f"values ({t_run / K:.2f}s each)"
+        )
+        evidence = {
+            "mode": how,
+            "compilations": n_after - n_before,
+            "compiled": names,
+            "compile_seconds": t_compile,
+            "run_seconds": t_run,
+        }
     else:
         maps, secs, n_comp, t_comp, cache = sweep_full(
             lf.views, edges, surface, base, tuple(params), grid, counter
         )
         later = f"{np.median(secs[1:]):.1f}s" if K > 1 else "n/a"
-        print(f"full stage: first call {secs[0]:.1f}s ({n_comp[0]} XLA compilation(s), "
-              f"{t_comp[0]:.1f}s tracing+compiling), later calls median {later} with "
-              f"{int(n_comp[1:].sum())} compilations in total; jit cache entries after {K} "
-              f"calls: {cache} (1 = compiled once)")
+        print(
+            f"full stage: first call {secs[0]:.1f}s ({n_comp[0]} XLA compilation(s), "
+            f"{t_comp[0]:.1f}s tracing+compiling), later calls median {later} with "
+            f"{int(n_comp[1:].sum())} compilations in total; jit cache entries after {K} "
+            f"calls: {cache} (1 = compiled once)"
+        )
         print(f"compiled during the loop: {counter.names[n_before:]}")
-        evidence = {"call_seconds": secs.tolist(), "compilations_per_call": n_comp.tolist(),
-                    "compiled": counter.names[n_before:],
-                    "compile_seconds_per_call": t_comp.tolist(), "jit_cache_size": int(cache)}
+        evidence = {
+            "call_seconds": secs.tolist(),
+            "compilations_per_call": n_comp.tolist(),
+            "compiled": counter.names[n_before:],
+            "compile_seconds_per_call": t_comp.tolist(),
+            "jit_cache_size": int(cache),
+        }
 
     table = []
     for k in range(K):
@@ -356,23 +394,36 @@ def main(argv: list[str] | None = None) -> int:
     for k, r in enumerate(table):
         vals = "".join(f"{r[p]:>14g}" for p in params)
         mark = "  <- best MSE" if k == best else ""
-        print(f"{vals}{r['mse_x100']:>10.3f}{r['badpix_0.07']:>11.2f}{r['q25_x100']:>10.3f}"
-              f"{r['seconds']:>9.2f}{mark}")
+        print(
+            f"{vals}{r['mse_x100']:>10.3f}{r['badpix_0.07']:>11.2f}{r['q25_x100']:>10.3f}"
+            f"{r['seconds']:>9.2f}{mark}"
+        )
     if all(all(np.isclose(r[k], table[0][k], rtol=1e-6) for k in METRIC_KEYS) for r in table):
-        print("NOTE: the metrics are identical for every value: the centre view (the only one "
-              "with ground truth used here) does not depend on this parameter at this stage.")
+        print(
+            "NOTE: the metrics are identical for every value: the centre view (the only one "
+            "with ground truth used here) does not depend on this parameter at this stage."
+        )
     if args.stage == "centre":
-        print("(centre stage seconds = batched run time / number of values; raw diffusion, "
-              "before refinement and weighted median)")
+        print(
+            "(centre stage seconds = batched run time / number of values; raw diffusion, "
+            "before refinement and weighted median)"
+        )
 
     png.parent.mkdir(parents=True, exist_ok=True)
     plot_sweep(png, lf.name, args.stage, params, values, table, defaults)
     print(f"\nwrote {png}")
     if args.json:
-        out = {"scene": lf.name, "source": str(lf.source), "scale": args.scale,
-               "stage": args.stage, "params": params, "values": [v.tolist() for v in values],
-               "defaults": defaults, "compile": evidence,
-               "table": table}
+        out = {
+            "scene": lf.name,
+            "source": str(lf.source),
+            "scale": args.scale,
+            "stage": args.stage,
+            "params": params,
+            "values": [v.tolist() for v in values],
+            "defaults": defaults,
+            "compile": evidence,
+            "table": table,
+        }
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(out, indent=2))
         print(f"wrote {args.json}")
