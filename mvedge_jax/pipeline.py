@@ -60,7 +60,12 @@ STAGES = ("edges", "surface", "reconstruct")
 #: start varies by ±0.1 BadPix(0.07) from run to run): the session-5 rates (0.005, 0.03)
 #: gave antinous BadPix(0.07) −23.0 to −24.5% in five runs; label rate 0.008 and position
 #: rate 0.05 with ``select_min_change = 0`` (every pixel may take the optimised value)
-#: −25.2 to −26.0% in three runs, and backgammon −26.8% (against −27.5%).
+#: −25.2 to −26.0% in three runs, and backgammon −26.8% (against −27.5%). Session 8 (2-core
+#: CPU, these rates): with the departures splatted per point (`predict`'s ``prior``; the
+#: start is now the Ch. 6 map exactly) and the SSIM term in the merge's cost
+#: (``ReconstructConfig.select_ssim``), antinous 8.02, 12.06 (−26.1%), 64.4 and backgammon
+#: 1.22, 1.19 (−31.6%), 16.5; the optimised map alone (before sharpening and merge) went
+#: from 11.07, 18.31 to 7.94, 15.66 on antinous.
 OPTIMIZE_DEFAULT = OptimizeConfig(
     model=ModelConfig(
         render=RenderConfig(
@@ -292,10 +297,11 @@ def optimize_disparity(
     2. Self-supervised block-coordinate Adam (`optimize`, eq 7.16) against the other views
        of the central cross-hair, with their ``(dr, dc)`` offsets. With
        ``diffuse_residual`` the diffusion spreads the points' departures from the Ch. 6 map
-       rather than the labels themselves (`predict`'s ``prior``; not in the thesis): the
-       start reproduces the Ch. 6 map, and slanted surfaces keep their slope between sparse
-       points (antinous MSE×100 7.92 → 7.42, backgammon BadPix(0.07) 1.46 → 1.29 before
-       the merge of step 4; session 5).
+       rather than the labels themselves (`predict`'s ``prior``; not in the thesis): each
+       point carries its departure from the Ch. 6 map under it, so the start reproduces the
+       Ch. 6 map exactly, and slanted surfaces keep their slope between sparse points
+       (antinous MSE×100 7.92 → 7.42, backgammon BadPix(0.07) 1.46 → 1.29 before the merge
+       of step 4; session 5).
     3. With ``sharpen_result``: the optimised centre map is sharpened like the Ch. 6 one
        (`sharpen` with ``config.reconstruct``: photo-consistent snapping and the weighted
        median filter; the thesis, Sec. 7.2.1, post-processes its Ch. 7 results with the
@@ -303,8 +309,10 @@ def optimize_disparity(
     4. With ``select_initial``: the optimised map and the Ch. 6 centre map are merged pixel
        by pixel by photo-consistency with the cross-hair views (`select_centre`; not in the
        thesis): the optimised value is kept where it differs by more than
-       ``config.reconstruct.select_min_change`` (0 by default) and matches the views'
-       colours better. The
+       ``config.reconstruct.select_min_change`` (0 by default) and matches the views
+       better, by colour L1 plus ``select_ssim`` times the SSIM dissimilarity (eq 7.16's
+       data terms; the L1 alone missed half the pixels the optimisation had fixed on
+       antinous, session 8). The
        optimisation fixes gross errors at depth edges but re-renders the whole map from
        points and loses fine accuracy elsewhere; the merge keeps both (backgammon,
        BadPix(0.01) 24.5 % optimised alone, 12.1 % merged).

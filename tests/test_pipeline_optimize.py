@@ -260,13 +260,15 @@ def _centre_before_after(folder, *configs):
 
 @pytest.mark.slow
 def test_optimize_antinous_accuracy(data_dir):
-    """Full-resolution antinous with the default schedule (~9 min on 2 cores). Measured
-    (session 5, residual diffusion and merge): centre MSE×100 8.10 → 6.50, BadPix(0.07)
-    16.4 → 12.8, Q25×100 0.98 → 0.83."""
+    """Full-resolution antinous with the default schedule (~4 min on 2 cores): the Ch. 7
+    target, BadPix(0.07) at least 25% below the Ch. 6 result with MSE×100 at most 10% worse.
+    Measured (session 8, per-point departures and the SSIM term in the merge): MSE×100
+    8.02 → 6.52, BadPix(0.07) 16.31 → 12.06 (−26.1%); session 7 (L1 merge): 12.57
+    (−22.9%)."""
     before, [(after, info)] = _centre_before_after(data_dir / "hci4d" / "additional" / "antinous")
     assert info["loss_history"][-1] < info["loss_history"][0]
-    assert after["badpix_0.07"] < min(before["badpix_0.07"] - 2.0, 14.0), (before, after)
-    assert after["mse_x100"] < 7.2, after
+    assert after["badpix_0.07"] <= 0.75 * before["badpix_0.07"], (before, after)
+    assert after["mse_x100"] <= 1.10 * before["mse_x100"], (before, after)
 
 
 @pytest.mark.slow
@@ -275,8 +277,9 @@ def test_optimize_backgammon_target(data_dir):
 
     Default (every pixel may take the optimised value, ``select_min_change = 0``, since
     session 6): the Ch. 7 target, BadPix(0.07) at least 25% below the Ch. 6 result with
-    MSE×100 at most 10% worse. Measured (session 7): MSE×100 1.297 → 1.256, BadPix(0.07)
-    1.744 → 1.241 (−28.8%); the price is fine accuracy, BadPix(0.01) 13.9 → 18.7.
+    MSE×100 at most 10% worse. Measured (session 8): MSE×100 1.297 → 1.218, BadPix(0.07)
+    1.744 → 1.193 (−31.6%); the price is fine accuracy, BadPix(0.01) 13.9 → 16.5 (session 7:
+    1.256, 1.241, 18.7).
     ``select_min_change = 0.02`` (the optimised value only where it moves by more than
     that) keeps the fine accuracy of Ch. 6 instead, as the README says: MSE×100 1.255,
     BadPix(0.07) 1.243, BadPix(0.01) 13.0 (session 7).

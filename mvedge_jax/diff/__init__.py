@@ -22,6 +22,7 @@ Choices where the thesis leaves room (see the docstrings for details):
 * The depth order is piecewise constant: gradients reach depth only through the label values.
 """
 
+from ..lightfield import ssim_map  # re-exported: the SSIM term of the loss
 from ._composite import RenderResult, render
 from ._config import RenderConfig
 from ._end_to_end import (
@@ -45,7 +46,6 @@ from ._loss import (
     occlusion_mask,
     photometric_terms,
     self_supervised_loss,
-    ssim_map,
     supervised_loss,
 )
 from ._model import (

@@ -76,6 +76,12 @@ class ReconstructConfig(eqx.Module):
         select_min_change: `select_centre` tests a candidate centre map only where it differs
             from the incumbent by more than this (pixels per view step).
         select_margin: colour-cost advantage the candidate needs there (L1 colour units).
+        select_ssim: weight of the SSIM dissimilarity in the cost of `select_centre`
+            (`photo_cost`'s ``ssim``; 0 = colour L1 only). 1 weighs it like eq 7.16, whose
+            terms the Ch. 7 optimisation minimises. Measured on antinous (session 8): the
+            L1 alone cannot tell disparities ±0.05 apart on the faint texture of the floor and
+            background (the L1 error of the GT and of GT − 0.05 is equal there; the SSIM term
+            is 6% higher), and the merge missed half the pixels the optimisation had fixed.
         fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
         fill_data_weight: data weight of the reprojected pixels in that solve.
         fill_hole_weight: weight, in that solve, of the background fill
@@ -153,6 +159,7 @@ class ReconstructConfig(eqx.Module):
     matte_impure_weight: Array = eqx.field(converter=_f32, default=0.05)
     select_min_change: Array = eqx.field(converter=_f32, default=0.0)
     select_margin: Array = eqx.field(converter=_f32, default=0.0)
+    select_ssim: Array = eqx.field(converter=_f32, default=1.0)
     fill_c: Array = eqx.field(converter=_f32, default=1.0)
     fill_data_weight: Array = eqx.field(converter=_f32, default=1000.0)
     fill_hole_weight: Array = eqx.field(converter=_f32, default=1000.0)
@@ -205,6 +212,7 @@ class ReconstructConfig(eqx.Module):
             "matte_impure_weight",
             "select_min_change",
             "select_margin",
+            "select_ssim",
         )
         positive = ("centre_eps", "wmf_sigma", "epi_eps", "epi_photo_sigma")
         for name in nonneg + positive:

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float
 
-from ..lightfield import backward_warp_planar
+from ..lightfield import backward_warp_planar, ssim_map
 
 
 def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
@@ -53,31 +53,55 @@ def photo_cost(
     *,
     aggregate: int = 0,
     sigma: float = 0.1,
+    ssim: float | Array = 0.0,
 ) -> Float[Array, "H W"]:
     """Occlusion-aware colour cost of a disparity hypothesis per pixel.
 
     Each view is warped to the reference with the candidate disparity (`backward_warp`, done
-    channels first by `backward_warp_planar`); the L1 colour difference is averaged within
-    four half-planes of view offsets (left ``dc < 0``, right ``dc > 0``, up ``dr < 0``, down
-    ``dr > 0``) over the views whose sample falls inside the image, and the smallest half-plane mean is the cost: a point next to an occluder is
+    channels first by `backward_warp_planar`); its cost per pixel is the L1 colour
+    difference summed over the channels, plus ``ssim`` times the SSIM dissimilarity
+    ``clip((1 - SSIM) / 2, 0, 1)`` (`ssim_map`, 3×3 windows) summed over the channels. The
+    costs are averaged within four half-planes of view offsets (left ``dc < 0``, right
+    ``dc > 0``, up ``dr < 0``, down ``dr > 0``) over the views whose sample falls inside the
+    image, and the smallest half-plane mean is the cost: a point next to an occluder is
     visible from at least one side. ``inf`` where no view samples inside the image. With
     ``aggregate > 0`` the half-plane means are first averaged over a colour-weighted
     ``(2 aggregate + 1)²`` window (adaptive support weights, ``sigma`` in colour units), which
     suppresses chance matches of single pixels.
+
+    Args:
+        candidate: ``(H, W)`` disparity hypothesis of the reference view (pixels per view
+            step).
+        reference: ``(H, W, C)`` colour of the reference view in [0, 1].
+        views: ``(K, H, W, C)`` other views.
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each view relative to the reference.
+        aggregate: radius of the colour-weighted aggregation (0: per pixel).
+        sigma: colour scale of the aggregation weights.
+        ssim: weight of the SSIM dissimilarity (0: colour L1 only). SSIM compares local
+            structure normalised by contrast, so it still tells disparities apart on faint
+            texture where the L1 difference is at the level of the noise.
+
+    Returns:
+        ``(H, W)`` cost (colour units), ``inf`` where no view sees the pixel.
+
+    References:
+        Thesis eq 7.15 (warping error), Sec. 7.1.5 (SSIM term, ref. [110]).
     """
 
     planes = jnp.moveaxis(views, -1, -3)
-    return _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma)
+    return _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, ssim)
 
 
-def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma):
+def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, ssim=0.0):
     """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
-    `backward_warp_planar`), so that callers looping over candidates transpose them once."""
+    `backward_warp_planar`), so that callers looping over candidates transpose them once.
+    A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation."""
     H, W = candidate.shape
     ref_planes = jnp.moveaxis(reference, -1, -3)
     ys, xs = jnp.meshgrid(
         jnp.arange(H, dtype=candidate.dtype), jnp.arange(W, dtype=candidate.dtype), indexing="ij"
     )
+    use_ssim = not (isinstance(ssim, int | float) and ssim == 0)
 
     def diff(view, off):
         w = backward_warp_planar(view, candidate, off)
@@ -85,7 +109,11 @@ def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma):
         sy = ys - off[0] * candidate
         inside = (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
         # A sum of channel slices: XLA's CPU reduction over a short axis is slow.
-        return sum(jnp.abs(w[c] - ref_planes[c]) for c in range(w.shape[0])), inside
+        cost = sum(jnp.abs(w[c] - ref_planes[c]) for c in range(w.shape[0]))
+        if use_ssim:
+            s = jnp.clip((1.0 - ssim_map(ref_planes, w, channels_last=False)) / 2.0, 0.0, 1.0)
+            cost = cost + jnp.asarray(ssim, cost.dtype) * sum(s[c] for c in range(s.shape[0]))
+        return cost, inside
 
     costs, inside = jax.vmap(diff)(planes, offsets)  # (K, H, W) each
     dr, dc = offsets[:, 0], offsets[:, 1]
@@ -169,6 +197,7 @@ def photo_select(
     margin: float | Array = 0.0,
     aggregate: int = 3,
     sigma: float | Array = 0.1,
+    ssim: float | Array = 0.0,
 ) -> tuple[Float[Array, "H W"], Bool[Array, "H W"]]:
     """Per-pixel choice between two disparity maps of one view by multi-view photo-consistency.
 
@@ -193,6 +222,7 @@ def photo_select(
         margin: cost advantage the candidate needs (colour units, L1 over channels).
         aggregate: radius of the colour-weighted cost aggregation of `photo_cost`.
         sigma: colour scale of the aggregation weights.
+        ssim: weight of the SSIM dissimilarity in the cost (`photo_cost`).
 
     Returns:
         ``(selected (H, W), took (H, W) bool)``: the merged map and where the candidate won.
@@ -205,7 +235,10 @@ def photo_select(
             f"incumbent and candidate must have the same shape; got {tuple(incumbent.shape)} "
             f"and {tuple(candidate.shape)}"
         )
-    cost = lambda d: photo_cost(d, reference, views, offsets, aggregate=aggregate, sigma=sigma)
+
+    def cost(d):
+        return photo_cost(d, reference, views, offsets, aggregate=aggregate, sigma=sigma, ssim=ssim)
+
     c_inc, c_cand = cost(incumbent), cost(candidate)
     took = (jnp.abs(candidate - incumbent) > min_change) & (c_cand + margin < c_inc)
     return jnp.where(took, candidate, incumbent), took

@@ -299,8 +299,9 @@ def select_centre(
     cross-hair views (`photo_select`; not in the thesis).
 
     Where ``candidate`` differs from ``incumbent`` by more than ``config.select_min_change``
-    and has the lower occlusion-aware colour cost (by ``config.select_margin``, aggregated
-    over a ``(2 select_aggregate + 1)²`` colour-weighted window), it wins; elsewhere the
+    and has the lower occlusion-aware colour cost (`photo_cost`: colour L1 plus
+    ``config.select_ssim`` times the SSIM dissimilarity; by ``config.select_margin``,
+    aggregated over a ``(2 select_aggregate + 1)²`` colour-weighted window), it wins; elsewhere the
     incumbent stays. `optimize_disparity` merges the sharpened Ch. 7 map (candidate) into the
     Ch. 6 centre map (incumbent) this way: the optimisation corrects gross errors at depth
     edges, while the Ch. 6 map keeps its fine accuracy elsewhere. jit-compiled.
@@ -336,6 +337,7 @@ def select_centre(
         min_change=config.select_min_change,
         margin=config.select_margin,
         aggregate=config.select_aggregate,
+        ssim=config.select_ssim,
     )
 
 
