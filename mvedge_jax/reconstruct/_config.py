@@ -81,7 +81,7 @@ class ReconstructConfig(eqx.Module):
             terms the Ch. 7 optimisation minimises. Measured on antinous (session 8): the
             L1 alone cannot tell disparities ±0.05 apart on the faint texture of the floor and
             background (the L1 error of the GT and of GT − 0.05 is equal there; the SSIM term
-            is 6% higher), and the merge missed half the pixels the optimisation had fixed.
+            is 5% higher), and the merge missed half the pixels the optimisation had fixed.
         fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
         fill_data_weight: data weight of the reprojected pixels in that solve.
         fill_hole_weight: weight, in that solve, of the background fill
