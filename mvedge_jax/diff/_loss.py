@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..lightfield import backward_warp, forward_project, ssim_map
+from ..lightfield import backward_warp, forward_project, ssim_dissimilarity
 from ._config import _check_nonnegative, _check_positive, _scalar
 
 
@@ -172,7 +172,7 @@ def photometric_terms(
         warped = backward_warp(view, d, off)
         m = occlusion_mask(d, off, tolerance=config.occlusion_tolerance).astype(d.dtype)
         l1 = jnp.mean(jnp.abs(centre - warped), axis=-1)
-        dssim = jnp.mean(jnp.clip((1.0 - ssim_map(centre, warped)) / 2.0, 0.0, 1.0), axis=-1)
+        dssim = jnp.mean(ssim_dissimilarity(centre, warped), axis=-1)
         return l1 * m, dssim * m, m
 
     l1, dssim, m = jax.vmap(per_view)(others, offsets)

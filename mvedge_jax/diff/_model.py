@@ -216,21 +216,15 @@ def predict(
         Thesis eqs 7.1–7.2, Sec. 7.1.5 (ϑ = exp(-Q), w = exp(-R)).
     """
     shape = params.shape
-    wx, wy = smoothness_weights(params.Q, config.smoothness)
-    if prior is None:
-        rendered = render(
-            params.position, params.label, params.R, shape, config.render, valid=valid
-        )
-        lam = rendered.weight * jnp.asarray(config.label_weight, rendered.weight.dtype)
-        sol = solve_poisson(lam, rendered.label, wx, wy, x0=x0, config=config.solver)
-        return Prediction(disparity=sol.x, rendered=rendered, solve=sol)
-    prior = jnp.asarray(prior, params.label.dtype)
-    if prior.shape != shape:
-        raise ValueError(f"prior must have shape {shape}; got {tuple(prior.shape)}")
-    prior = jax.lax.stop_gradient(prior)
-    # each point's departure from the prior under it: a splat that reaches across a depth
-    # edge carries the point's departure, not the jump of the prior (zero at the start)
-    departure = params.label - sample_bilinear(prior, params.position)
+    departure = None
+    if prior is not None:
+        prior = jnp.asarray(prior, params.label.dtype)
+        if prior.shape != shape:
+            raise ValueError(f"prior must have shape {shape}; got {tuple(prior.shape)}")
+        prior = jax.lax.stop_gradient(prior)
+        # each point's departure from the prior under it: a splat that reaches across a
+        # depth edge carries the point's departure, not the jump of the prior
+        departure = params.label - sample_bilinear(prior, params.position)
     rendered = render(
         params.position,
         params.label,
@@ -240,7 +234,11 @@ def predict(
         valid=valid,
         value=departure,
     )
+    wx, wy = smoothness_weights(params.Q, config.smoothness)
     lam = rendered.weight * jnp.asarray(config.label_weight, rendered.weight.dtype)
+    if prior is None:
+        sol = solve_poisson(lam, rendered.label, wx, wy, x0=x0, config=config.solver)
+        return Prediction(disparity=sol.x, rendered=rendered, solve=sol)
     r0 = None if x0 is None else jnp.asarray(x0, lam.dtype) - prior
     sol = solve_poisson(lam, rendered.label, wx, wy, x0=r0, config=config.solver)
     rendered = eqx.tree_at(lambda r: r.label, rendered, rendered.label + prior)

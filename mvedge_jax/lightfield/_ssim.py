@@ -61,3 +61,17 @@ def ssim_map(
     num = (2 * mu_a * mu_b + c1) * (2 * cov + c2)
     den = (mu_a**2 + mu_b**2 + c1) * (va + vb + c2)
     return num / den
+
+
+def ssim_dissimilarity(
+    a: Float[ArrayLike, "H W C"], b: Float[ArrayLike, "H W C"], *, channels_last: bool = True
+) -> Array:
+    """``clip((1 - SSIM) / 2, 0, 1)`` per pixel and channel (`ssim_map`): 0 for identical
+    local structure, 1 for opposite; the SSIM term of eq 7.16 and of `photo_cost`.
+
+    Args and errors: see `ssim_map`.
+
+    Returns:
+        Dissimilarity in [0, 1], the shape of the inputs.
+    """
+    return jnp.clip((1.0 - ssim_map(a, b, channels_last=channels_last)) / 2.0, 0.0, 1.0)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, Bool, Float
 
-from ..lightfield import backward_warp_planar, ssim_map
+from ..lightfield import backward_warp_planar, ssim_dissimilarity
 
 
 def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
@@ -60,7 +60,7 @@ def photo_cost(
     Each view is warped to the reference with the candidate disparity (`backward_warp`, done
     channels first by `backward_warp_planar`); its cost per pixel is the L1 colour
     difference summed over the channels, plus ``ssim`` times the SSIM dissimilarity
-    ``clip((1 - SSIM) / 2, 0, 1)`` (`ssim_map`, 3×3 windows) summed over the channels. The
+    (`ssim_dissimilarity`, 3×3 windows) summed over the channels. The
     costs are averaged within four half-planes of view offsets (left ``dc < 0``, right
     ``dc > 0``, up ``dr < 0``, down ``dr > 0``) over the views whose sample falls inside the
     image, and the smallest half-plane mean is the cost: a point next to an occluder is
@@ -111,7 +111,7 @@ def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, 
         # A sum of channel slices: XLA's CPU reduction over a short axis is slow.
         cost = sum(jnp.abs(w[c] - ref_planes[c]) for c in range(w.shape[0]))
         if use_ssim:
-            s = jnp.clip((1.0 - ssim_map(ref_planes, w, channels_last=False)) / 2.0, 0.0, 1.0)
+            s = ssim_dissimilarity(ref_planes, w, channels_last=False)
             cost = cost + jnp.asarray(ssim, cost.dtype) * sum(s[c] for c in range(s.shape[0]))
         return cost, inside
 

@@ -301,10 +301,11 @@ def select_centre(
     Where ``candidate`` differs from ``incumbent`` by more than ``config.select_min_change``
     and has the lower occlusion-aware colour cost (`photo_cost`: colour L1 plus
     ``config.select_ssim`` times the SSIM dissimilarity; by ``config.select_margin``,
-    aggregated over a ``(2 select_aggregate + 1)²`` colour-weighted window), it wins; elsewhere the
-    incumbent stays. `optimize_disparity` merges the sharpened Ch. 7 map (candidate) into the
-    Ch. 6 centre map (incumbent) this way: the optimisation corrects gross errors at depth
-    edges, while the Ch. 6 map keeps its fine accuracy elsewhere. jit-compiled.
+    aggregated over a ``(2 select_aggregate + 1)²`` colour-weighted window), it wins;
+    elsewhere the incumbent stays. `optimize_disparity` merges the sharpened Ch. 7 map
+    (candidate) into the Ch. 6 centre map (incumbent) this way: the optimisation corrects
+    gross errors at depth edges, while the Ch. 6 map keeps its fine accuracy elsewhere.
+    jit-compiled.
 
     Args:
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.

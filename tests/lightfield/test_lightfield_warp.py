@@ -76,20 +76,23 @@ def test_backward_warp_jit_vmap_over_offsets(key):
         np.testing.assert_allclose(batched[i], backward_warp(img, d, offs[i]), atol=1e-6)
 
 
-def test_backward_warp_gradients(x64, key):
+def _channels_last(warp_planar):
+    """`backward_warp_planar` with channels-last input and output, for shared tests."""
+    return lambda img, d, off: jnp.moveaxis(warp_planar(jnp.moveaxis(img, -1, 0), d, off), 0, -1)
+
+
+@pytest.mark.parametrize("planar", [False, True], ids=["backward_warp", "backward_warp_planar"])
+def test_backward_warp_gradients(x64, key, planar):
+    warp = _channels_last(backward_warp_planar) if planar else backward_warp
     k1, k2 = jax.random.split(key)
     img = np.asarray(jax.random.uniform(k1, (8, 9, 2), dtype=jnp.float64))
     # Keep sample positions away from integers and the border, where bilinear is not smooth.
     d = np.asarray(0.3 + 0.2 * jax.random.uniform(k2, (8, 9), dtype=jnp.float64))
     off = np.array([0.5, 1.7])
-    check_grads(
-        lambda i, dd: backward_warp(i, dd, off), (img, d), order=1, modes=("rev",), eps=1e-6
-    )
+    check_grads(lambda i, dd: warp(i, dd, off), (img, d), order=1, modes=("rev",), eps=1e-6)
     # The gradient w.r.t. disparity is the image derivative along -(dc, dr).
-    ramp = np.tile(np.arange(9, dtype=np.float64) * 2.0, (8, 1))  # ∂/∂x = 2
-    g = jax.grad(lambda dd: backward_warp(ramp, dd, (0.0, 1.0))[2:6, 3:7].sum())(
-        np.full((8, 9), 0.4)
-    )
+    ramp = np.tile(np.arange(9, dtype=np.float64) * 2.0, (8, 1))[..., None]  # ∂/∂x = 2
+    g = jax.grad(lambda dd: warp(ramp, dd, (0.0, 1.0))[2:6, 3:7].sum())(np.full((8, 9), 0.4))
     np.testing.assert_allclose(np.asarray(g)[2:6, 3:7], -2.0, atol=1e-9)
 
 
@@ -120,20 +123,6 @@ def test_backward_warp_planar_bad_shapes_and_vmap(key):
     batched = jax.jit(jax.vmap(backward_warp_planar, in_axes=(None, None, 0)))(planes, d, offs)
     for i in range(2):
         np.testing.assert_allclose(batched[i], backward_warp_planar(planes, d, offs[i]))
-
-
-def test_backward_warp_planar_gradients(x64, key):
-    k1, k2 = jax.random.split(key)
-    planes = np.asarray(jax.random.uniform(k1, (2, 8, 9), dtype=jnp.float64))
-    d = np.asarray(0.3 + 0.2 * jax.random.uniform(k2, (8, 9), dtype=jnp.float64))
-    off = np.array([0.5, 1.7])
-    check_grads(
-        lambda p, dd: backward_warp_planar(p, dd, off),
-        (planes, d),
-        order=1,
-        modes=("rev",),
-        eps=1e-6,
-    )
 
 
 # ---- forward_project -------------------------------------------------------------------------
