@@ -1,0 +1,22 @@
+"""End-to-end entry points: light field → edges → surface vectors → disparity for every view.
+
+The stages (thesis Ch. 4.1 → 4.2–4.3 → 6) are jittable pure functions of arrays
+(`estimate_disparity_arrays`). The `estimate_disparity` driver compiles each stage, runs it,
+and records the seconds per stage. `optimize_disparity` refines a result with the
+differentiable edge model (thesis Ch. 7) and propagates the refined centre map to every view.
+"""
+
+from ._chain import STAGES as STAGES
+from ._chain import estimate_disparity_arrays as estimate_disparity_arrays
+from ._config import CONFIG_TABLES as CONFIG_TABLES
+from ._config import OPTIMIZE_DEFAULT as OPTIMIZE_DEFAULT
+from ._config import PipelineConfig as PipelineConfig
+from ._config import config_from_dict as config_from_dict
+from ._driver import Result as Result
+from ._driver import cross_hair_others as cross_hair_others
+from ._driver import estimate_disparity as estimate_disparity
+from ._driver import optimize_disparity as optimize_disparity
+from ._driver import optimize_steps as optimize_steps
+from ._outputs import epi_overlay as epi_overlay
+from ._outputs import quality_metrics as quality_metrics
+from ._outputs import write_outputs as write_outputs
