@@ -388,5 +388,28 @@ def demo(out, force, config_path, optimize) -> None:
         click.echo(line)
 
 
+@main.command("config")
+@click.option(
+    "--dump",
+    is_flag=True,
+    help="Print every field of the pipeline configuration as TOML.",
+)
+@click.option(
+    "--config",
+    "config_path",
+    type=click.Path(path_type=str),
+    default=None,
+    help="TOML file whose values are merged over the defaults before printing.",
+)
+def config_command(dump: bool, config_path: str | None) -> None:
+    """Show the pipeline configuration (`mvedge config --dump > cfg.toml`, edit, then
+    `mvedge depth PATH --config cfg.toml`)."""
+    from .pipeline import config_to_toml
+
+    if not dump:
+        raise click.UsageError("nothing to do; pass --dump to print the configuration")
+    click.echo(config_to_toml(_config_from_file(config_path)), nl=False)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main(prog_name=os.path.basename(__file__))

@@ -49,10 +49,10 @@ from ..edges import (
     VERTICAL,
     EdgeConfig,
     detect_edges,
+    resolve_d_max,
     soft_filter_responses,
     soft_select,
 )
-from ..edges._pipeline import resolve_d_max
 from ..lightfield import LightField
 from ._config import RenderConfig
 from ._loss import supervised_loss

@@ -5,15 +5,15 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
-import jax.numpy as jnp
 from jaxtyping import Array, Float
+
+from .._fields import check_fields, hyperparameter, static
 
 _SUBPIXEL = ("none", "parabolic", "variance")
 _DIRECTIONS = ("both", "horizontal", "vertical")
-
-
-def _f32(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.float32)
+#: Edge-detection strategies: ``"hard"`` (Alg. 1: argmax label, sub-pixel search) and
+#: ``"soft"`` (the same points, labelled by a softmax over the filter responses).
+STRATEGIES = ("hard", "soft")
 
 
 class EdgeConfig(eqx.Module):
@@ -32,6 +32,12 @@ class EdgeConfig(eqx.Module):
         d_max_fallback: bank half-range when neither ``d_max`` nor the scene range is known.
         directions: ``"both"`` (merge horizontal and vertical EPIs), ``"horizontal"`` or
             ``"vertical"``.
+        strategy: ``"hard"`` (Alg. 1: each point's label is the best filter's disparity,
+            refined by the parabolic and variance searches) or ``"soft"`` (the same points,
+            labelled by the expected disparity under a softmax over the filter responses at
+            temperature ``temperature`` times the pixel's largest response; see
+            `soft_labels`). The hard labels are piecewise smooth in the hyperparameters (the
+            argmax and the search's grid minimum jump); the soft labels are smooth.
         blur_radius: half-width in pixels of the Gaussian pre-blur kernel.
         chunk: EPIs per chunk of the filter-bank convolution (bounds peak memory).
         refine_chunk: EPIs per chunk of the variance search.
@@ -79,10 +85,15 @@ class EdgeConfig(eqx.Module):
         trilateral_radius: half-width in pixels of the trilateral filter window (3 was more
             accurate than 5 or 10 on HCI backgammon and antinous, and is much cheaper).
 
-    Attributes (array leaves):
-        presmooth_sigma: Gaussian pre-blur of the views, pixels (SPEC: ≈ 0.85).
+    Attributes (array leaves; "differentiable" ones are smooth inputs of the chain, the
+    others thresholds, piecewise constant, whose gradient is zero where it exists):
+        presmooth_sigma: Gaussian pre-blur of the views, pixels (≈ 0.85). Differentiable.
         edge_shift: offset in pixels of the two sides of each Prewitt filter from its line.
-        aa_sigma: anti-aliasing of the filter lines (`prewitt_bank`; 0 = linear interpolation).
+            Differentiable.
+        aa_sigma: anti-aliasing of the filter lines (`prewitt_bank`; 0 = linear
+            interpolation). Differentiable where > 0 (0 switches to linear interpolation).
+        temperature: softmax temperature of the ``"soft"`` strategy, relative to each
+            pixel's largest filter response. Differentiable.
         lambda_frac: line-fitting suppression distance λ as a fraction of the EPI height
             (thesis 0.2; default 0: with the distinctiveness test below, suppressing the
             neighbours of confident lines only loses accurate points).
@@ -94,6 +105,7 @@ class EdgeConfig(eqx.Module):
         min_local_std: drop candidates whose 3x3 EPI colour standard deviation (LAB / 100) is
             lower (flat regions).
         variance_offset: pixels to either side of the edge at which colour is sampled.
+            Differentiable.
         max_colour_std: drop points whose best line still has a colour standard deviation
             along it (LAB / 100 units, less-varying side) above this; ``inf`` disables.
         outlier_tau: τ of eq 4.2. The thesis's 8e-5 belongs to its confidence scale; ours
@@ -108,147 +120,83 @@ class EdgeConfig(eqx.Module):
         entropy_t, entropy_alpha: proposal scale ``alpha * t**j`` of the random search
             (thesis 0.88, 0.15).
         sigma_s, sigma_d, sigma_c: trilateral filter widths in pixels, disparity and LAB / 100
-            (thesis 10, 0.1, 0.5).
+            (thesis 10, 0.1, 0.5). Differentiable.
 
     Raises:
+        TypeError: on construction, for a value of the wrong type (e.g. a string for a
+            number, an array for a scalar).
         ValueError: on construction, for out-of-range values.
 
     References:
-        Thesis Ch. 4.1 (Alg. 1, eqs 4.1–4.6); SPEC §1.
+        Thesis Ch. 4.1 (Alg. 1, eqs 4.1–4.6).
     """
 
-    n_filters: int = eqx.field(static=True, default=61)
-    d_max: float | None = eqx.field(static=True, default=None)
-    d_margin: float = eqx.field(static=True, default=0.25)
-    d_max_fallback: float = eqx.field(static=True, default=4.0)
-    directions: str = eqx.field(static=True, default="both")
-    blur_radius: int = eqx.field(static=True, default=3)
-    chunk: int = eqx.field(static=True, default=64)
-    refine_chunk: int = eqx.field(static=True, default=8)
-    nms: bool = eqx.field(static=True, default=False)
-    line_capacity: int | None = eqx.field(static=True, default=None)
-    subpixel: str = eqx.field(static=True, default="variance")
-    variance_steps: int = eqx.field(static=True, default=9)
-    variance_radius: float = eqx.field(static=True, default=1.5)
-    variance_min_shift: float = eqx.field(static=True, default=0.4)
-    cubic: bool = eqx.field(static=True, default=True)
-    variance_on_blurred: bool = eqx.field(static=True, default=True)
-    outliers: bool | None = eqx.field(static=True, default=None)
-    outlier_auto_views: int = eqx.field(static=True, default=5)
-    outlier_test: str = eqx.field(static=True, default="agreement")
-    outlier_window_frac: float = eqx.field(static=True, default=1.0 / 15.0)
-    outlier_label_tol: int = eqx.field(static=True, default=1)
-    multiscale: bool = eqx.field(static=True, default=False)
-    gradient_alignment: bool = eqx.field(static=True, default=False)
-    alignment_c: float = eqx.field(static=True, default=4.0)
-    drop_invisible: bool = eqx.field(static=True, default=False)
-    entropy_search: bool = eqx.field(static=True, default=False)
-    entropy_iters: int = eqx.field(static=True, default=10)
-    entropy_bins: int = eqx.field(static=True, default=16)
-    trilateral: bool = eqx.field(static=True, default=True)
-    trilateral_radius: int = eqx.field(static=True, default=3)
+    n_filters: int = static(61, lower=3)
+    d_max: float | None = static(None, kind="float", lower=0.0, lower_open=True, upper=64.0)
+    d_margin: float = static(0.25, lower=0.0, upper=64.0)
+    d_max_fallback: float = static(4.0, lower=0.0, lower_open=True, upper=64.0)
+    directions: str = static("both", choices=_DIRECTIONS)
+    strategy: str = static("hard", choices=STRATEGIES)
+    blur_radius: int = static(3, lower=1, upper=64)
+    chunk: int = static(64, lower=1)
+    refine_chunk: int = static(8, lower=1)
+    nms: bool = static(False)
+    line_capacity: int | None = static(None, kind="int", lower=1)
+    subpixel: str = static("variance", choices=_SUBPIXEL)
+    variance_steps: int = static(9, lower=3, upper=1025)
+    variance_radius: float = static(1.5, lower=0.0, lower_open=True)
+    variance_min_shift: float = static(0.4, lower=0.0)
+    cubic: bool = static(True)
+    variance_on_blurred: bool = static(True)
+    outliers: bool | None = static(None, kind="bool")
+    outlier_auto_views: int = static(5, lower=0)
+    outlier_test: str = static("agreement", choices=("count", "agreement"))
+    outlier_window_frac: float = static(1.0 / 15.0, lower=0.0, lower_open=True, upper=1.0)
+    outlier_label_tol: int = static(1, lower=0)
+    multiscale: bool = static(False)
+    gradient_alignment: bool = static(False)
+    alignment_c: float = static(4.0, lower=1.0)
+    drop_invisible: bool = static(False)
+    entropy_search: bool = static(False)
+    entropy_iters: int = static(10, lower=1, upper=1000)
+    entropy_bins: int = static(16, lower=1, upper=4096)
+    trilateral: bool = static(True)
+    trilateral_radius: int = static(3, lower=1, upper=64)
 
-    presmooth_sigma: Float[Array, ""] = eqx.field(converter=_f32, default=0.85)
-    edge_shift: Float[Array, ""] = eqx.field(converter=_f32, default=1.0)
-    aa_sigma: Float[Array, ""] = eqx.field(converter=_f32, default=0.0)
-    lambda_frac: Float[Array, ""] = eqx.field(converter=_f32, default=0.0)
-    min_confidence: Float[Array, ""] = eqx.field(converter=_f32, default=1e-6)
-    min_ratio: Float[Array, ""] = eqx.field(converter=_f32, default=2.0)
-    min_local_std: Float[Array, ""] = eqx.field(converter=_f32, default=0.0)
-    variance_offset: Float[Array, ""] = eqx.field(converter=_f32, default=1.5)
-    max_colour_std: Float[Array, ""] = eqx.field(converter=_f32, default=float("inf"))
-    outlier_tau: Float[Array, ""] = eqx.field(converter=_f32, default=1e-5)
-    outlier_min_agreement: Float[Array, ""] = eqx.field(converter=_f32, default=0.15)
-    multiscale_lambda_frac: Float[Array, ""] = eqx.field(converter=_f32, default=0.2)
-    tau_f: Float[Array, ""] = eqx.field(converter=_f32, default=math.pi / 13)
-    tau_v: Float[Array, ""] = eqx.field(converter=_f32, default=math.pi / 10)
-    entropy_t: Float[Array, ""] = eqx.field(converter=_f32, default=0.88)
-    entropy_alpha: Float[Array, ""] = eqx.field(converter=_f32, default=0.15)
-    sigma_s: Float[Array, ""] = eqx.field(converter=_f32, default=10.0)
-    sigma_d: Float[Array, ""] = eqx.field(converter=_f32, default=0.1)
-    sigma_c: Float[Array, ""] = eqx.field(converter=_f32, default=0.5)
+    presmooth_sigma: Float[Array, ""] = hyperparameter(
+        0.85, differentiable=True, lower=0.0, lower_open=True
+    )
+    edge_shift: Float[Array, ""] = hyperparameter(
+        1.0, differentiable=True, lower=0.0, lower_open=True
+    )
+    aa_sigma: Float[Array, ""] = hyperparameter(0.0, differentiable=True, lower=0.0)
+    temperature: Float[Array, ""] = hyperparameter(
+        0.1, differentiable=True, lower=0.0, lower_open=True
+    )
+    lambda_frac: Float[Array, ""] = hyperparameter(0.0, differentiable=False, lower=0.0)
+    min_confidence: Float[Array, ""] = hyperparameter(1e-6, differentiable=False, lower=0.0)
+    min_ratio: Float[Array, ""] = hyperparameter(2.0, differentiable=False, lower=0.0)
+    min_local_std: Float[Array, ""] = hyperparameter(0.0, differentiable=False, lower=0.0)
+    variance_offset: Float[Array, ""] = hyperparameter(
+        1.5, differentiable=True, lower=0.0, lower_open=True
+    )
+    max_colour_std: Float[Array, ""] = hyperparameter(
+        float("inf"), differentiable=False, lower=0.0, lower_open=True
+    )
+    outlier_tau: Float[Array, ""] = hyperparameter(1e-5, differentiable=False, lower=0.0)
+    outlier_min_agreement: Float[Array, ""] = hyperparameter(0.15, differentiable=False, lower=0.0)
+    multiscale_lambda_frac: Float[Array, ""] = hyperparameter(0.2, differentiable=False, lower=0.0)
+    tau_f: Float[Array, ""] = hyperparameter(math.pi / 13, differentiable=False, lower=0.0)
+    tau_v: Float[Array, ""] = hyperparameter(math.pi / 10, differentiable=False, lower=0.0)
+    entropy_t: Float[Array, ""] = hyperparameter(
+        0.88, differentiable=False, lower=0.0, lower_open=True
+    )
+    entropy_alpha: Float[Array, ""] = hyperparameter(0.15, differentiable=False, lower=0.0)
+    sigma_s: Float[Array, ""] = hyperparameter(
+        10.0, differentiable=True, lower=0.0, lower_open=True
+    )
+    sigma_d: Float[Array, ""] = hyperparameter(0.1, differentiable=True, lower=0.0, lower_open=True)
+    sigma_c: Float[Array, ""] = hyperparameter(0.5, differentiable=True, lower=0.0, lower_open=True)
 
     def __check_init__(self):
-        if not (isinstance(self.n_filters, int) and self.n_filters >= 3):
-            raise ValueError(f"n_filters must be an int >= 3; got {self.n_filters!r}")
-        if self.d_max is not None and not (math.isfinite(self.d_max) and self.d_max > 0):
-            raise ValueError(f"d_max must be a positive finite float or None; got {self.d_max!r}")
-        if not (self.d_max_fallback > 0 and self.d_margin >= 0):
-            raise ValueError(
-                f"need d_max_fallback > 0 and d_margin >= 0; got {self.d_max_fallback}, "
-                f"{self.d_margin}"
-            )
-        if self.directions not in _DIRECTIONS:
-            raise ValueError(f"directions must be one of {_DIRECTIONS}; got {self.directions!r}")
-        if self.outlier_test not in ("count", "agreement"):
-            raise ValueError(
-                f"outlier_test must be 'count' or 'agreement'; got {self.outlier_test!r}"
-            )
-        if self.subpixel not in _SUBPIXEL:
-            raise ValueError(f"subpixel must be one of {_SUBPIXEL}; got {self.subpixel!r}")
-        if self.line_capacity is not None and not (
-            isinstance(self.line_capacity, int) and self.line_capacity >= 1
-        ):
-            raise ValueError(
-                f"line_capacity must be None or an int >= 1; got {self.line_capacity!r}"
-            )
-        for name in (
-            "blur_radius",
-            "chunk",
-            "refine_chunk",
-            "variance_steps",
-            "entropy_iters",
-            "entropy_bins",
-            "trilateral_radius",
-        ):
-            v = getattr(self, name)
-            if not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"{name} must be an int >= 1; got {v!r}")
-        if self.variance_steps < 3:
-            raise ValueError(f"variance_steps must be >= 3; got {self.variance_steps}")
-        if not (0 < self.outlier_window_frac <= 1):
-            raise ValueError(
-                f"outlier_window_frac must be in (0, 1]; got {self.outlier_window_frac}"
-            )
-        if self.outlier_label_tol < 0:
-            raise ValueError(f"outlier_label_tol must be >= 0; got {self.outlier_label_tol}")
-        if not self.alignment_c >= 1:
-            raise ValueError(f"alignment_c must be >= 1; got {self.alignment_c}")
-        if not (isinstance(self.variance_radius, (int, float)) and self.variance_radius > 0):
-            raise ValueError(f"variance_radius must be a float > 0; got {self.variance_radius!r}")
-        if not (isinstance(self.variance_min_shift, (int, float)) and self.variance_min_shift >= 0):
-            raise ValueError(
-                f"variance_min_shift must be a float >= 0; got {self.variance_min_shift!r}"
-            )
-        positive = (
-            "presmooth_sigma",
-            "edge_shift",
-            "variance_offset",
-            "sigma_s",
-            "sigma_d",
-            "sigma_c",
-            "entropy_t",
-            "max_colour_std",
-        )
-        nonneg = (
-            "multiscale_lambda_frac",
-            "aa_sigma",
-            "min_ratio",
-            "min_local_std",
-            "lambda_frac",
-            "min_confidence",
-            "outlier_tau",
-            "tau_f",
-            "tau_v",
-            "entropy_alpha",
-        )
-        try:
-            vals = {n: float(getattr(self, n)) for n in positive + nonneg}
-        except Exception:  # traced leaves (vmap over hyperparameters): nothing to check
-            return
-        for n in positive:
-            if not vals[n] > 0:
-                raise ValueError(f"{n} must be > 0; got {vals[n]}")
-        for n in nonneg:
-            if not vals[n] >= 0:
-                raise ValueError(f"{n} must be >= 0; got {vals[n]}")
+        check_fields(self)

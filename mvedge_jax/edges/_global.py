@@ -110,7 +110,8 @@ def trilateral_filter(
     )
     ch = edges.direction.astype(jnp.int32)
     ys = jnp.where(use, yi, H + 1)  # out of bounds: not rasterised
-    grid = jnp.zeros((2, H, W, 5), jnp.float32).at[ch, ys, xi].set(vals, mode="drop")
+    dt = vals.dtype
+    grid = jnp.zeros((2, H, W, 5), dt).at[ch, ys, xi].set(vals, mode="drop")
     p = jnp.moveaxis(grid, -1, 0)  # (5, 2, H, W)
     q = jnp.pad(p, ((0, 0), (0, 0), (r, r), (r, r)))
     a_s = 0.5 / config.sigma_s**2
@@ -123,16 +124,18 @@ def trilateral_filter(
         dy, dx = k // side, k % side
         qk = lax.dynamic_slice(q, (0, 0, dy, dx), (5, 2, H, W))
         e = (
-            a_s * ((dy - r) ** 2 + (dx - r) ** 2).astype(jnp.float32)
+            a_s * ((dy - r) ** 2 + (dx - r) ** 2).astype(dt)
             + a_d * (p[1][:, None] - qk[1][None]) ** 2
             + a_c * jnp.sum((p[2:][:, :, None] - qk[2:][:, None]) ** 2, axis=0)
         )  # (2 p-directions, 2 q-directions, H, W)
         w = qk[0][None] * jnp.exp(-e)
         return num + jnp.sum(w * qk[1][None], axis=1), den + jnp.sum(w, axis=1)
 
-    zero = jnp.zeros((2, H, W), jnp.float32)
+    zero = jnp.zeros((2, H, W), dt)
     num, den = lax.fori_loop(0, side * side, body, (zero, zero))
-    filt = num / jnp.maximum(den, 1e-20)
-    fd = filt[ch, yi, xi]
-    ok = use & (den[ch, yi, xi] > 0) & (grid[ch, yi, xi, 0] > 0)
-    return jnp.where(ok, fd, edges.disparity)
+    # A pixel that holds a point weighs itself by exp(0) = 1, so den >= 1 there; elsewhere the
+    # quotient is not used, and dividing by 1 keeps its gradient finite.
+    occupied = grid[..., 0] > 0
+    filt = num / jnp.where(occupied, den, 1.0)
+    ok = use & occupied[ch, yi, xi]
+    return jnp.where(ok, filt[ch, yi, xi], edges.disparity)

@@ -307,15 +307,100 @@ def _to_edgeset(lines: dict[str, Array], direction: int) -> tuple[EdgeSet, Array
     return es, f(lines["label"])
 
 
-@eqx.filter_jit
-def _detect_arrays(row_views, col_views, config: EdgeConfig, d_max: float, key) -> EdgeSet:
-    """Jitted core of `detect_edges` on the cross-hair views ``(V, H, W, 3)``, ``(U, H, W, 3)``."""
-    row_views = eqx.error_if(
-        row_views, ~jnp.all(jnp.isfinite(row_views)), "light field views contain NaN or Inf"
+def _sample_rows(maps: Array, x: Array, y: Array) -> Array:
+    """Rows of ``maps (H, W, n)`` at points ``(x, y)``: linear along x, nearest along y
+    (points lie on pixel rows of the centre view)."""
+    H, W = maps.shape[:2]
+    yi = jnp.clip(jnp.round(y), 0, H - 1).astype(jnp.int32)
+    xc = jnp.clip(x, 0, W - 1)
+    x0 = jnp.clip(jnp.floor(xc), 0, max(W - 2, 0))
+    f = (xc - x0)[:, None]
+    xi = x0.astype(jnp.int32)
+    return maps[yi, xi] * (1 - f) + maps[yi, jnp.minimum(xi + 1, W - 1)] * f
+
+
+def soft_labels(
+    edges: EdgeSet,
+    row_views: Float[Array, "V H W 3"],
+    col_views: Float[Array, "U H W 3"],
+    config: EdgeConfig,
+    *,
+    d_max: float,
+) -> EdgeSet:
+    """Relabel edge points with the soft (softmax) disparity of the filter bank.
+
+    At each point the filter-response magnitudes ``r_i`` of its own EPI direction
+    (`soft_filter_responses`, interpolated linearly along the EPI's spatial axis) give
+    ``p = softmax(r / τ)`` with ``τ = config.temperature · max_i r_i`` (relative, so the
+    softmax does not depend on the image contrast) and the label ``Σ p_i d_i``. The points,
+    their validity and confidence are unchanged; the intercepts follow the new disparity. The
+    labels are smooth functions of the views and of ``presmooth_sigma``, ``edge_shift``,
+    ``aa_sigma`` and ``temperature``.
+
+    Args:
+        edges: edge set of `detect_edges_arrays` (capacity ``N``).
+        row_views: ``(V, H, W, 3)`` central row of views, RGB in [0, 1].
+        col_views: ``(U, H, W, 3)`` central column of views.
+        config: `EdgeConfig`.
+        d_max: the bank's half-range, pixels per view step (static).
+
+    Returns:
+        The `EdgeSet` with soft ``disparity`` and matching ``intercepts``.
+
+    References:
+        Thesis Alg. 1, relaxed (softmax for argmax).
+    """
+    kw = dict(
+        d_max=d_max,
+        n_filters=config.n_filters,
+        presmooth_sigma=config.presmooth_sigma,
+        edge_shift=config.edge_shift,
+        aa_sigma=config.aa_sigma,
+        blur_radius=config.blur_radius,
     )
-    col_views = eqx.error_if(
-        col_views, ~jnp.all(jnp.isfinite(col_views)), "light field views contain NaN or Inf"
-    )
+    disparity = edges.disparity
+    for direction, views in ((HORIZONTAL, row_views), (VERTICAL, col_views)):
+        mag, disps = soft_filter_responses(views, direction=direction, **kw)
+        if direction == HORIZONTAL:  # EPIs of pixel rows: the spatial axis is x
+            r = _sample_rows(mag, edges.x, edges.y)
+        else:  # EPIs of pixel columns: the spatial axis is y
+            r = _sample_rows(jnp.swapaxes(mag, 0, 1), edges.y, edges.x)
+        tau = config.temperature * jnp.max(r, axis=-1, keepdims=True)
+        d, _ = soft_select(r, disps, tau)
+        disparity = jnp.where(edges.direction == direction, d.astype(disparity.dtype), disparity)
+    n = jnp.where(edges.direction == HORIZONTAL, row_views.shape[0], col_views.shape[0])
+    pos = jnp.where(edges.direction == HORIZONTAL, edges.x, edges.y)
+    intercepts = jnp.stack([pos + (n // 2) * disparity, pos - (n - 1 - n // 2) * disparity], -1)
+    disparity = jnp.where(edges.valid, disparity, edges.disparity)
+    return eqx.tree_at(lambda e: (e.disparity, e.intercepts), edges, (disparity, intercepts))
+
+
+def detect_edges_arrays(
+    row_views: Float[Array, "V H W 3"],
+    col_views: Float[Array, "U H W 3"],
+    config: EdgeConfig,
+    *,
+    d_max: float,
+    key: Array,
+) -> EdgeSet:
+    """`detect_edges` on arrays: pure and jittable, without the host-side checks.
+
+    Use `check_cross_hair` first (it validates the views and returns ``d_max``) and
+    `warn_dropped` after; `detect_edges` does all three.
+
+    Args:
+        row_views: ``(V, H, W, 3)`` central row of views, RGB in [0, 1], finite.
+        col_views: ``(U, H, W, 3)`` central column of views.
+        config: `EdgeConfig` (its ``strategy`` selects hard or soft labels).
+        d_max: the bank's half-range, pixels per view step (static).
+        key: PRNG key of the entropy search.
+
+    Returns:
+        The `EdgeSet` (see `detect_edges`).
+
+    References:
+        Thesis Ch. 4.1 (Alg. 1, Secs. 4.1.1–4.1.5).
+    """
     _, H, W, _ = row_views.shape
     kh, kv = jax.random.split(key)
     sets = []
@@ -332,6 +417,8 @@ def _detect_arrays(row_views, col_views, config: EdgeConfig, d_max: float, key) 
     for es, lab in sets[1:]:
         edges = concatenate(edges, es)
         labels = jnp.concatenate([labels, lab])
+    if config.strategy == "soft":
+        edges = soft_labels(edges, row_views, col_views, config, d_max=d_max)
     few_views = min(row_views.shape[0], col_views.shape[0]) <= config.outlier_auto_views
     if config.outliers or (config.outliers is None and few_views):
         keep = reject_outliers(edges, labels, (H, W), config)
@@ -369,6 +456,9 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
     5. Outlier rejection by same-disparity neighbours (4.1.3, eqs 4.1–4.2).
     6. Trilateral filter of the sparse disparities (eq 4.6, radius 3).
 
+    With ``config.strategy = "soft"`` the points are then relabelled by `soft_labels` (a
+    softmax over the filter responses; smooth in the hyperparameters) before steps 5–6.
+
     Optional stages: gradient-alignment test (eq 4.3), dropping points not visible in the
     centre view (eq 4.4; the ``visible`` flag is always computed), entropy-based random search
     of the intercepts (eq 4.5), spatial multi-scale (4.1.4). `EdgeConfig` documents every
@@ -397,6 +487,32 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
     References:
         Thesis Ch. 4.1 (Alg. 1, Secs. 4.1.1–4.1.5); SPEC §1.
     """
+    d_max = check_cross_hair(lf, config)
+    if key is None:
+        key = jax.random.key(0)
+    row, col = lf.cross_hair()
+    edges = _detect_jit(row, col, config, d_max=d_max, key=key)
+    warn_dropped(edges, config)
+    return edges
+
+
+_detect_jit = jax.jit(detect_edges_arrays, static_argnames=("d_max",))
+
+
+def check_cross_hair(lf: LightField, config: EdgeConfig) -> float:
+    """Host-side checks of `detect_edges`' input; returns the bank's half-range ``d_max``.
+
+    Args:
+        lf: the light field (its central row and column of views are read).
+        config: `EdgeConfig`.
+
+    Returns:
+        ``d_max`` in pixels per view step (`resolve_d_max`).
+
+    Raises:
+        ValueError: fewer than 3 views in a direction, a disparity range the bank cannot
+            cover, or non-finite pixels in the cross-hair.
+    """
     U, V = lf.grid
     H, W = lf.size
     if U < 3 or V < 3:
@@ -408,27 +524,30 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
             f"disparity range ±{d_max:.3g} moves a line by {reach:.1f} px across the views, too "
             f"much for {H}x{W} views; lower d_max"
         )
-    if key is None:
-        key = jax.random.key(0)
     row, col = lf.cross_hair()
-    try:
-        finite = bool(np.isfinite(np.asarray(row)).all() and np.isfinite(np.asarray(col)).all())
-    except Exception:  # traced
-        finite = True
-    if not finite:
+    if isinstance(row, jax.core.Tracer) or isinstance(col, jax.core.Tracer):
+        return d_max
+    if not (np.isfinite(np.asarray(row)).all() and np.isfinite(np.asarray(col)).all()):
         raise ValueError("light field views contain NaN or Inf")
-    edges = _detect_arrays(row, col, config, d_max, key)
-    try:
-        dropped = int(edges.n_dropped)
-    except Exception:  # traced
-        dropped = 0
+    return d_max
+
+
+def warn_dropped(edges: EdgeSet, config: EdgeConfig) -> int:
+    """Warn when candidates did not fit in ``config.line_capacity``; returns their number.
+
+    Warns:
+        UserWarning: when ``edges.n_dropped > 0``.
+    """
+    if isinstance(edges.n_dropped, jax.core.Tracer):
+        return 0
+    dropped = int(edges.n_dropped)
     if dropped > 0:
         warnings.warn(
             f"detect_edges: {dropped} edge candidates did not fit in line_capacity="
             f"{config.line_capacity} per EPI and were dropped; raise EdgeConfig.line_capacity",
-            stacklevel=2,
+            stacklevel=3,
         )
-    return edges
+    return dropped
 
 
 def soft_filter_responses(

@@ -34,8 +34,8 @@ def _consistency(disparity, view_mask, target, *, fill_cracks: bool, per_pixel: 
 
 def view_consistency(
     disparity: Float[ArrayLike, "U V H W"],
-    target: tuple[int, int] | None = None,
     *,
+    target: tuple[int, int] | None = None,
     view_mask: Bool[ArrayLike, "U V"] | None = None,
     fill_cracks: bool = True,
     per_pixel: bool = False,

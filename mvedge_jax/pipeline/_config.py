@@ -6,38 +6,23 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
+import jax
+import numpy as np
 
+from .._fields import field_spec
 from ..diff import ModelConfig, OptimizeConfig, RenderConfig
 from ..edges import EdgeConfig
 from ..reconstruct import ReconstructConfig
 from ..surface import SurfaceConfig
 
 #: The default of ``PipelineConfig.optimize``: the thesis schedule and losses (Sec. 7.1.5) with
-#: settings measured to suit a start from the Ch. 6 result (dense, accurate labels): a narrower
+#: settings that suit a start from the Ch. 6 result (dense, accurate labels): a narrower
 #: splat (σ_S = 0.8, σ_λ = 0.5 instead of 1.3, 0.71) and stronger image-edge stops
-#: (``q_scale`` 30) encode the Ch. 6 map far more faithfully; a low density ρ = 0.1 keeps
-#: visible neighbours from hiding each other; larger tile capacities avoid overflow with
-#: dense points; one pass at a third of the authors' learning rates (Adam moves every label
-#: by about the learning rate per step, and more passes did not help on HCI crops).
-#: Measured at full resolution (centre view, Ch. 6 → optimised and sharpened, before the
-#: merge of `optimize_disparity`'s ``select_initial``): backgammon MSE×100 1.31 → 1.33,
-#: BadPix(0.07) 1.76 → 1.45, BadPix(0.01) 13.9 → 24.5; antinous 8.10 → 7.88, 16.4 → 12.7,
-#: 74.6 → 62.3 (session 3). With the merge: backgammon 1.31, 1.29, 12.1; antinous 7.81,
-#: 12.8, 68.5 (session 4). With the merge and the residual diffusion of
-#: `optimize_disparity`'s ``diffuse_residual`` (the default since session 5): backgammon
-#: 1.29, 1.24, 12.3; antinous 6.50, 12.8, 69.9. ``OptimizeConfig()`` (one pass) instead:
-#: backgammon 3.64, 4.99 (session 2). Twice the label rate (0.01) instead: antinous 7.98,
-#: 12.96, 62.1 before the merge (session 4; worse than 0.005). Session 6 (after the Ch. 6
-#: disocclusion and matting changes), on an H100 (whose scatter order varies, so the Ch. 6
-#: start varies by ±0.1 BadPix(0.07) from run to run): the session-5 rates (0.005, 0.03)
-#: gave antinous BadPix(0.07) −23.0 to −24.5% in five runs; label rate 0.008 and position
-#: rate 0.05 with ``select_min_change = 0`` (every pixel may take the optimised value)
-#: −25.2 to −26.0% in three runs, and backgammon −26.8% (against −27.5%). Session 8 (2-core
-#: CPU, these rates): with the departures splatted per point (`predict`'s ``prior``; the
-#: start is now the Ch. 6 map exactly) and the SSIM term in the merge's cost
-#: (``ReconstructConfig.select_ssim``), antinous 8.02, 12.06 (−26.1%), 64.4 and backgammon
-#: 1.22, 1.19 (−31.6%), 16.5; the optimised map alone (before sharpening and merge) went
-#: from 11.07, 18.31 to 7.94, 15.66 on antinous.
+#: (``q_scale`` 30) encode the Ch. 6 map faithfully; a low density ρ = 0.1 keeps visible
+#: neighbours from hiding each other; larger tile capacities avoid overflow with dense
+#: points; one pass at about half the authors' learning rates (Adam moves every label by
+#: about the learning rate per step). The measurements behind these values are in
+#: docs/RESULTS.md. ``OptimizeConfig()`` is the thesis configuration.
 OPTIMIZE_DEFAULT = OptimizeConfig(
     model=ModelConfig(
         render=RenderConfig(
@@ -70,6 +55,106 @@ class PipelineConfig(eqx.Module):
     surface: SurfaceConfig = SurfaceConfig()
     reconstruct: ReconstructConfig = ReconstructConfig()
     optimize: OptimizeConfig = OPTIMIZE_DEFAULT
+
+
+_STAGE_FIELDS = ("edges", "surface", "reconstruct")
+
+
+def hyperparameter_paths(
+    config: PipelineConfig | None = None, *, differentiable: bool | None = None
+) -> tuple[str, ...]:
+    """Dotted paths (``"edges.presmooth_sigma"``) of the chain's scalar hyperparameters.
+
+    Args:
+        config: the configuration whose stage configs are listed (default
+            `PipelineConfig()`; only the field declarations matter).
+        differentiable: ``True``: only the fields the chain is smooth in; ``False``: only the
+            thresholds (piecewise constant); ``None``: all.
+
+    Returns:
+        The paths, stage by stage in declaration order.
+    """
+    config = PipelineConfig() if config is None else config
+    out = []
+    for stage in _STAGE_FIELDS:
+        sub = getattr(config, stage)
+        for f in dataclasses.fields(sub):
+            spec = field_spec(f)
+            if spec is None or spec.kind != "hyperparameter":
+                continue
+            if differentiable is None or spec.differentiable == differentiable:
+                out.append(f"{stage}.{f.name}")
+    return tuple(out)
+
+
+def get_path(config: eqx.Module, path: str):
+    """The value at a dotted path, e.g. ``get_path(config, "edges.presmooth_sigma")``."""
+    value = config
+    for part in path.split("."):
+        value = getattr(value, part)
+    return value
+
+
+def replace_paths(config: eqx.Module, values: dict) -> eqx.Module:
+    """``config`` with the fields at the dotted paths of ``values`` replaced (traceable: the
+    values may be tracers, so this works inside ``jit``, ``grad`` and ``vmap``).
+
+    Raises:
+        AttributeError: on a path that names no field.
+    """
+    paths = list(values)
+    for path in paths:
+        get_path(config, path)  # raises on a bad path
+
+    def where(c):
+        return tuple(get_path(c, p) for p in paths)
+
+    return eqx.tree_at(where, config, tuple(values[p] for p in paths))
+
+
+def with_values(config: PipelineConfig, values: dict) -> PipelineConfig:
+    """``config`` with concrete new values at dotted paths, rebuilt through the stage
+    configs' constructors (so the values are converted and validated, unlike
+    `replace_paths`).
+
+    Raises:
+        AttributeError: on a path that names no field.
+        TypeError, ValueError: on a value the field does not accept.
+    """
+    by_stage: dict[str, dict] = {}
+    for path, value in values.items():
+        stage, _, name = path.partition(".")
+        if stage not in _STAGE_FIELDS or "." in name:
+            raise AttributeError(f"{path!r} is not a field of a stage config (stage.field)")
+        get_path(config, path)
+        by_stage.setdefault(stage, {})[name] = value
+    updates = {
+        stage: dataclasses.replace(getattr(config, stage), **fields)
+        for stage, fields in by_stage.items()
+    }
+    return dataclasses.replace(config, **updates)
+
+
+def smooth_config(config: PipelineConfig | None = None) -> PipelineConfig:
+    """``config`` with the smooth surrogates of its piecewise-constant stages: soft edge
+    labels (``edges.strategy = "soft"``) and the weighted mean instead of the weighted
+    median (``reconstruct.sharpen_filter = "mean"``). Use it to differentiate the chain
+    with respect to ``edges.temperature`` and ``reconstruct.wmf_sigma`` (the chain is
+    piecewise constant in them otherwise), or for gradient-based tuning (`tune`).
+
+    Args:
+        config: the configuration to modify (default `PipelineConfig()`).
+
+    Returns:
+        The `PipelineConfig` with ``edges.strategy = "soft"`` and
+        ``reconstruct.sharpen_filter = "mean"``, other fields unchanged.
+    """
+    config = PipelineConfig() if config is None else config
+    return dataclasses.replace(
+        config,
+        edges=dataclasses.replace(config.edges, strategy="soft"),
+        reconstruct=dataclasses.replace(config.reconstruct, sharpen_filter="mean"),
+    )
 
 
 def _tuples(value):
@@ -115,3 +200,65 @@ def config_from_dict(data: dict) -> PipelineConfig:
     return PipelineConfig(
         **{name: _override(getattr(base, name), data.get(name, {})) for name in CONFIG_TABLES}
     )
+
+
+def _plain(value):
+    """A config value as TOML data: configs → tables, 0-d arrays → floats, tuples → arrays."""
+    if isinstance(value, eqx.Module):
+        out = {}
+        for f in dataclasses.fields(value):
+            v = getattr(value, f.name)
+            if v is not None:
+                out[f.name] = _plain(v)
+        return out
+    if isinstance(value, jax.Array | np.ndarray | np.generic):
+        arr = np.asarray(value)
+        if arr.ndim == 0 and arr.dtype == np.float32:
+            return float(str(arr[()]))  # the shortest decimal that reads back as this float32
+        if arr.ndim == 0:
+            return arr.item()
+        return arr.tolist()
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def config_to_dict(config: PipelineConfig) -> dict:
+    """Every field of a `PipelineConfig` as nested plain data (the tables of its TOML form;
+    fields that are ``None`` are left out, which reads back as their default ``None``).
+
+    Raises:
+        ValueError: if a field is ``None`` where its default is not (TOML has no null).
+    """
+    data = _plain(config)
+    base = _plain(PipelineConfig())
+
+    def check(d, b, where):
+        for k, v in b.items():
+            if k not in d:
+                raise ValueError(f"{where}{k} is None, which TOML cannot write")
+            if isinstance(v, dict):
+                check(d[k], v, f"{where}{k}.")
+
+    check(data, base, "")
+    return data
+
+
+def config_to_toml(config: PipelineConfig) -> str:
+    """The TOML text of a `PipelineConfig`, every field written (`config_to_dict`); reading
+    it back with `config_from_toml` (or ``mvedge depth --config``) gives the same config."""
+    import tomli_w
+
+    return tomli_w.dumps(config_to_dict(config))
+
+
+def config_from_toml(text: str) -> PipelineConfig:
+    """A `PipelineConfig` from TOML text (`config_from_dict` of its tables).
+
+    Raises:
+        ValueError: on invalid TOML (``tomllib.TOMLDecodeError``) or a bad value.
+        TypeError: on an unknown parameter or a value of the wrong type.
+    """
+    import tomllib
+
+    return config_from_dict(tomllib.loads(text))

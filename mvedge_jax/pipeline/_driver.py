@@ -12,11 +12,12 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ..diff import OptimizeConfig, optimize, params_from_edges
-from ..edges import EdgeSet
+from ..edges import EdgeSet, check_cross_hair, warn_dropped
 from ..lightfield import LightField
 from ..reconstruct import Reconstruction, propagate, select_centre, sharpen
 from ..surface import SurfaceResult
-from ._chain import _stage_fns
+from ._chain import edges_stage, reconstruct_stage, surface_stage
+from ._compile import STAGE_CACHE
 from ._config import PipelineConfig
 
 
@@ -41,6 +42,10 @@ class Result(eqx.Module):
     compile_seconds: float = eqx.field(static=True)
 
 
+def _edges(views, config, key, *, d_max):
+    return edges_stage(views, config, key=key, d_max=d_max)
+
+
 def estimate_disparity(
     lf: LightField,
     config: PipelineConfig | None = None,
@@ -50,13 +55,17 @@ def estimate_disparity(
 ) -> Result:
     """Disparity for every view of a light field (the main job, thesis Ch. 6).
 
-    Each stage is compiled ahead of time and then run, so that ``compile_seconds`` and
-    ``seconds_per_stage`` separate compilation from work (the persistent compilation cache,
-    when enabled, makes later compilations cheap).
+    A thin driver over the chain (`estimate_disparity_arrays`): the host-side checks of
+    `mvedge_jax.edges.check_cross_hair`, then each stage (`edges_stage`, `surface_stage`,
+    `reconstruct_stage`) compiled ahead of time and run, then `warn_dropped`. Compiled
+    stages are kept per (static configuration, array shapes): a second call, also with new
+    values of the configuration's array fields, does not recompile, and ``compile_seconds``
+    is then 0. The library's persistent compilation cache makes the first compilation in a
+    new process cheap too (`mvedge_jax.enable_compilation_cache`).
 
     Args:
         lf: the light field; its cross-hair must be complete.
-        config: pipeline configuration (defaults: thesis parameters).
+        config: pipeline configuration (default `PipelineConfig()`).
         key: PRNG key for the randomised line refinement; default ``jax.random.key(0)``.
         progress: optional callback ``progress(stage, event)`` with event ``"compile"``,
             ``"run"`` or ``"done"``, for progress bars.
@@ -65,36 +74,43 @@ def estimate_disparity(
         A `Result` with ``disparity`` of shape ``(U, V, H, W)``.
 
     Raises:
-        ValueError: if the views contain NaN/Inf.
+        ValueError: if the views contain NaN/Inf, or the scene's disparity range does not
+            suit the filter bank (`check_cross_hair`).
+
+    Warns:
+        UserWarning: when edge candidates were dropped for lack of capacity (`warn_dropped`).
+
+    References:
+        Thesis Ch. 4.1, 4.2–4.3 and 6.1.
     """
     config = PipelineConfig() if config is None else config
     key = jax.random.key(0) if key is None else key
-    if not bool(jnp.isfinite(lf.views).all()):
+    if not bool(np.isfinite(np.asarray(lf.views)).all()):
         raise ValueError(f"light field {lf.name!r} contains NaN or Inf pixel values")
-    edges_fn, surface_fn, reconstruct_fn = _stage_fns(config, lf.disparity_range)
-    centre = lf.centre_view
+    d_max = check_cross_hair(lf, config.edges)
+    views = jnp.asarray(lf.views)
     seconds: dict[str, float] = {}
     compile_total = 0.0
 
-    def run(stage, fn, *args):
+    def run_stage(stage, fn, *args, **static):
         nonlocal compile_total
         if progress:
             progress(stage, "compile")
-        t0 = time.perf_counter()
-        compiled = jax.jit(fn).lower(*args).compile()
-        compile_total += time.perf_counter() - t0
+        execute, c_seconds = STAGE_CACHE.compile(fn, *args, **static)
+        compile_total += c_seconds
         if progress:
             progress(stage, "run")
         t0 = time.perf_counter()
-        out = jax.block_until_ready(compiled(*args))
+        out = jax.block_until_ready(execute())
         seconds[stage] = time.perf_counter() - t0
         if progress:
             progress(stage, "done")
         return out
 
-    edges = run("edges", edges_fn, lf.views, key)
-    surface = run("surface", surface_fn, edges, centre)
-    rec = run("reconstruct", reconstruct_fn, lf.views, edges, surface)
+    edges = run_stage("edges", _edges, views, config, key, d_max=d_max)
+    warn_dropped(edges, config.edges)
+    surface = run_stage("surface", surface_stage, views, edges, config)
+    rec = run_stage("reconstruct", reconstruct_stage, views, edges, surface, config)
     return Result(
         disparity=rec.disparity,
         edges=edges,
@@ -138,6 +154,16 @@ def _one_per_pixel(edges: EdgeSet, valid: np.ndarray, shape: tuple[int, int]) ->
     keep = np.zeros_like(valid)
     keep[order[first]] = True
     return keep
+
+
+def _finish(views, centre, initial, edges, surface, config, *, sharpen_result, select_initial):
+    """Steps 3–5 of `optimize_disparity`: sharpen, merge with the Ch. 6 map, propagate."""
+    sharp = sharpen(views, centre, config) if sharpen_result else centre
+    took = jnp.ones(sharp.shape, bool)
+    if select_initial:
+        sharp, took = select_centre(views, initial, sharp, config)
+    rec = propagate(views, sharp, edges, surface, config)
+    return eqx.tree_at(lambda r: r.centre, rec, centre), took
 
 
 def optimize_steps(config: OptimizeConfig) -> int:
@@ -276,20 +302,19 @@ def optimize_disparity(
     optimize_seconds = time.perf_counter() - t0
     refined = jnp.asarray(hist["disparity"], jnp.float32)
 
-    def finish(views, centre, initial, edges, surface):
-        sharp = sharpen(views, centre, config.reconstruct) if sharpen_result else centre
-        took = jnp.ones(sharp.shape, bool)
-        if select_initial:
-            sharp, took = select_centre(views, initial, sharp, config.reconstruct)
-        rec = propagate(views, sharp, edges, surface, config.reconstruct)
-        return eqx.tree_at(lambda r: r.centre, rec, centre), took
-
-    args = (views, refined, initial, edges, result.surface)
+    execute, compile_seconds = STAGE_CACHE.compile(
+        _finish,
+        views,
+        refined,
+        initial,
+        edges,
+        result.surface,
+        config.reconstruct,
+        sharpen_result=sharpen_result,
+        select_initial=select_initial,
+    )
     t0 = time.perf_counter()
-    compiled = jax.jit(finish).lower(*args).compile()
-    compile_seconds = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    rec, took = jax.block_until_ready(compiled(*args))
+    rec, took = jax.block_until_ready(execute())
     propagate_seconds = time.perf_counter() - t0
 
     seconds = dict(result.seconds_per_stage)

@@ -18,4 +18,5 @@ from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
 from ._reconstruct import select_centre as select_centre
 from ._reconstruct import sharpen as sharpen
+from ._wmf import weighted_mean_filter as weighted_mean_filter
 from ._wmf import weighted_median_filter as weighted_median_filter

@@ -119,8 +119,9 @@ def rasterise_lines(
     si = jnp.broadcast_to(s[:, None], pos.shape)
     w = jnp.broadcast_to(weight[:, None], pos.shape)
     v = jnp.broadcast_to(disparity[:, None], pos.shape)
-    lam = jnp.zeros((S, A, L), jnp.float32)
-    num = jnp.zeros((S, A, L), jnp.float32)
+    dt = jnp.result_type(weight, disparity, jnp.float32)
+    lam = jnp.zeros((S, A, L), dt)
+    num = jnp.zeros((S, A, L), dt)
     for dl, b in ((0, 1.0 - f), (1, f)):
         li = l0 + dl
         ok = (li >= 0) & (li < L) & (si >= 0) & (si < S)
@@ -224,9 +225,13 @@ def edge_lines(
         ``(qx, qy, weight)``: the offset centre-view position ``p + offset_scale · n`` and the
         line weight ``max(epi_line_scale · λ_e, epi_line_floor)`` (0 for invalid points).
     """
-    off = jnp.asarray(offset, jnp.float32)
+    off = jnp.asarray(offset, jnp.result_type(offset, jnp.float32))
     qx = edges.x + config.offset_scale * off[:, 0]
     qy = edges.y + config.offset_scale * off[:, 1]
-    lam_e = jnp.clip(jnp.asarray(step_response, jnp.float32), 0.0, config.lambda_e_max)
+    lam_e = jnp.clip(
+        jnp.asarray(step_response, jnp.result_type(step_response, jnp.float32)),
+        0.0,
+        config.lambda_e_max,
+    )
     w = jnp.maximum(config.epi_line_scale * lam_e, config.epi_line_floor)
     return qx, qy, jnp.where(edges.valid, w, 0.0)

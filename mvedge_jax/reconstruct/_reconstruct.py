@@ -26,7 +26,7 @@ from ._crosshair import (
 )
 from ._matte import boundary_matte
 from ._photo import photo_refine, photo_select
-from ._wmf import weighted_median_filter
+from ._wmf import weighted_mean_filter, weighted_median_filter
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..surface import SurfaceResult
@@ -215,10 +215,12 @@ def _check_views(views) -> tuple[int, int, int, int]:
 
 
 def _check_views_and_centre(views, centre_disparity) -> tuple[Array, Array]:
-    """float32 views and centre map, shapes checked (`_check_views`, centre ``(H, W)``)."""
-    views = jnp.asarray(views, jnp.float32)
+    """Floating views and centre map (float32, or float64 when either is), shapes checked
+    (`_check_views`, centre ``(H, W)``)."""
+    dt = jnp.result_type(views, centre_disparity, jnp.float32)
+    views = jnp.asarray(views, dt)
     _, _, H, W = _check_views(views)
-    centre = jnp.asarray(centre_disparity, jnp.float32)
+    centre = jnp.asarray(centre_disparity, dt)
     if centre.shape != (H, W):
         raise ValueError(
             f"centre_disparity must have shape {(H, W)} (the views' H, W); "
@@ -240,7 +242,15 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         )
     if config.matte:
         sharp = _matte(sharp, colour_guide(views[rc, cc], config.colour_space), config)
-    if config.sharpen:
+    if config.sharpen and config.sharpen_filter == "mean":
+        sharp = weighted_mean_filter(
+            sharp,
+            views[rc, cc],
+            radius=config.wmf_radius,
+            sigma=config.wmf_sigma,
+            weight_type=config.wmf_weight,
+        )
+    elif config.sharpen:
         sharp = weighted_median_filter(
             sharp,
             views[rc, cc],
@@ -395,7 +405,7 @@ def _propagate(
         cross_h = _cross_hair_fill(cross_h, vh, ch, cc, config)
         cross_v = _cross_hair_fill(cross_v, vv, cv, rc, config)
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
-    disparity = jnp.zeros((U, V, H, W), jnp.float32)
+    disparity = jnp.zeros((U, V, H, W), cross_h.dtype)
     disparity = disparity.at[rc, :].set(cross_h)
     disparity = disparity.at[:, cc].set(cross_v)
     disparity = disparity.at[rc, cc].set(0.5 * (cross_h[cc] + cross_v[rc]))
@@ -540,7 +550,7 @@ def reconstruct(
     References:
         Thesis Sec. 6.1 (eqs 6.1–6.8); SPEC §4.
     """
-    views = jnp.asarray(views, jnp.float32)
+    views = jnp.asarray(views, jnp.result_type(views, jnp.float32))
     U, V, H, W = _check_views(views)
     centre_view = views[U // 2, V // 2]
     _check_inputs(edges, surface, centre_view)

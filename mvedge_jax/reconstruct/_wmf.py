@@ -41,8 +41,10 @@ def _block_median(
     width: int,
     weight_type: str,
     iterations: int,
+    statistic: str,
 ) -> Array:
-    """Weighted median of ``block`` output rows starting at output row ``row0``."""
+    """Weighted median (or, with ``statistic = "mean"``, weighted mean) of ``block`` output
+    rows starting at output row ``row0``."""
     r = radius
     k = 2 * r + 1
     rows = block + 2 * r
@@ -73,6 +75,11 @@ def _block_median(
 
     # Window offsets first: (K, block, W); reductions over axis 0 vectorise along W.
     dp, w = jax.vmap(sample)(oy, ox)
+    if statistic == "mean":
+        total = jnp.sum(w, axis=0)
+        some = total > 0
+        mean = jnp.sum(w * dp, axis=0) / jnp.where(some, total, 1.0)
+        return jnp.where(some, mean, d[r : r + block, r : r + width])
     half = 0.5 * jnp.sum(w, axis=0)  # (block, W)
     big = jnp.asarray(jnp.finfo(dp.dtype).max, dp.dtype)
     lo = jnp.min(jnp.where(w > 0, dp, big), axis=0)
@@ -96,8 +103,10 @@ def _block_median(
     return jnp.where(out < big, out, d[r : r + block, r : r + width])
 
 
-@functools.partial(jax.jit, static_argnames=("radius", "weight_type", "iterations", "block_rows"))
-def _wmf(disparity, guide, mask, sigma, *, radius, weight_type, iterations, block_rows):
+@functools.partial(
+    jax.jit, static_argnames=("radius", "weight_type", "iterations", "block_rows", "statistic")
+)
+def _wmf(disparity, guide, mask, sigma, *, radius, weight_type, iterations, block_rows, statistic):
     H, W = disparity.shape
     r = radius
     nblocks = -(-H // block_rows)
@@ -117,10 +126,44 @@ def _wmf(disparity, guide, mask, sigma, *, radius, weight_type, iterations, bloc
         width=W,
         weight_type=weight_type,
         iterations=iterations,
+        statistic=statistic,
     )
-    rows0 = jnp.arange(nblocks, dtype=jnp.int32) * block_rows
+    rows0 = jnp.arange(nblocks) * block_rows
     out = lax.map(fn, rows0)  # (nblocks, block, W)
     return out.reshape(Hp, W)[:H]
+
+
+def _prepare(disparity, guide, mask, radius, weight_type, block_rows):
+    """Validated ``(disparity (H, W) float, guide (H, W, C), mask (H, W))``."""
+    disparity = jnp.asarray(disparity)
+    guide = jnp.asarray(guide)
+    if disparity.ndim != 2:
+        raise ValueError(f"disparity must have shape (H, W); got {tuple(disparity.shape)}")
+    if guide.ndim == 2:
+        guide = guide[..., None]
+    if guide.ndim != 3 or guide.shape[:2] != disparity.shape:
+        raise ValueError(
+            f"guide must have shape {tuple(disparity.shape)} or {tuple(disparity.shape) + ('C',)}; "
+            f"got {tuple(guide.shape)}"
+        )
+    if int(radius) < 1:
+        raise ValueError(f"radius must be a positive integer; got {radius}")
+    if weight_type not in WEIGHT_TYPES:
+        raise ValueError(f"weight_type must be one of {WEIGHT_TYPES}; got {weight_type!r}")
+    if int(block_rows) < 1:
+        raise ValueError(f"block_rows must be >= 1; got {block_rows}")
+    if not jnp.issubdtype(disparity.dtype, jnp.floating):
+        disparity = disparity.astype(jnp.float32)
+    guide = guide.astype(disparity.dtype)
+    if mask is None:
+        mask = jnp.ones(disparity.shape, bool)
+    else:
+        mask = jnp.asarray(mask)
+        if mask.shape != disparity.shape:
+            raise ValueError(
+                f"mask must have shape {tuple(disparity.shape)}; got {tuple(mask.shape)}"
+            )
+    return disparity, guide, mask
 
 
 def weighted_median_filter(
@@ -148,7 +191,9 @@ def weighted_median_filter(
     value (exact unless two distinct samples lie within ``range / 2**iterations``).
     Sharpens depth steps that are aligned with colour edges. Jittable (all options but
     ``sigma`` are static); memory is bounded by processing ``block_rows`` rows at a time.
-    Not differentiable (piecewise constant).
+    Piecewise smooth: the output is one sample of the window, so gradients reach the selected
+    sample; the choice of sample (hence the dependence on ``sigma``) is piecewise constant.
+    `weighted_mean_filter` is its smooth surrogate.
 
     Args:
         disparity: ``(H, W)`` float disparity (any units).
@@ -172,34 +217,9 @@ def weighted_median_filter(
         time weighted median filtering for stereo matching and beyond", ICCV 2013; Zhang et
         al., "100+ times faster weighted median filter", CVPR 2014 (OpenCV's implementation).
     """
-    disparity = jnp.asarray(disparity)
-    guide = jnp.asarray(guide)
-    if disparity.ndim != 2:
-        raise ValueError(f"disparity must have shape (H, W); got {tuple(disparity.shape)}")
-    if guide.ndim == 2:
-        guide = guide[..., None]
-    if guide.ndim != 3 or guide.shape[:2] != disparity.shape:
-        raise ValueError(
-            f"guide must have shape {tuple(disparity.shape)} or {tuple(disparity.shape) + ('C',)}; "
-            f"got {tuple(guide.shape)}"
-        )
-    if int(radius) < 1:
-        raise ValueError(f"radius must be a positive integer; got {radius}")
-    if weight_type not in WEIGHT_TYPES:
-        raise ValueError(f"weight_type must be one of {WEIGHT_TYPES}; got {weight_type!r}")
-    if int(iterations) < 1 or int(block_rows) < 1:
-        raise ValueError(f"iterations and block_rows must be >= 1; got {iterations}, {block_rows}")
-    if not jnp.issubdtype(disparity.dtype, jnp.floating):
-        disparity = disparity.astype(jnp.float32)
-    guide = guide.astype(disparity.dtype)
-    if mask is None:
-        mask = jnp.ones(disparity.shape, bool)
-    else:
-        mask = jnp.asarray(mask)
-        if mask.shape != disparity.shape:
-            raise ValueError(
-                f"mask must have shape {tuple(disparity.shape)}; got {tuple(mask.shape)}"
-            )
+    disparity, guide, mask = _prepare(disparity, guide, mask, radius, weight_type, block_rows)
+    if int(iterations) < 1:
+        raise ValueError(f"iterations must be >= 1; got {iterations}")
     H = disparity.shape[0]
     block = int(min(block_rows, H))
     return _wmf(
@@ -211,4 +231,56 @@ def weighted_median_filter(
         weight_type=weight_type,
         iterations=int(iterations),
         block_rows=block,
+        statistic="median",
+    )
+
+
+def weighted_mean_filter(
+    disparity: Float[ArrayLike, "H W"],
+    guide: Float[ArrayLike, "H W C"],
+    *,
+    radius: int = 7,
+    sigma: float | ArrayLike = 0.1,
+    weight_type: str = "exp",
+    mask: ArrayLike | None = None,
+    block_rows: int = 8,
+) -> Float[Array, "H W"]:
+    """Joint weighted mean filter: the smooth surrogate of `weighted_median_filter`.
+
+    The same window and the same guide weights ``w(p, q)`` as `weighted_median_filter`, but
+    the output is ``Σ_q w(p, q) d_q / Σ_q w(p, q)``: a smooth function of the disparities and
+    of ``sigma`` (the weighted median only selects one sample, so it is piecewise constant in
+    ``sigma``). `ReconstructConfig.sharpen_filter` ``"mean"`` uses it to differentiate
+    through the sharpening step. A pixel whose window has zero weight keeps its value.
+
+    Args:
+        disparity: ``(H, W)`` float disparity (any units).
+        guide: ``(H, W, C)`` or ``(H, W)`` float guide image, e.g. RGB in ``[0, 1]``.
+        radius: window radius ``r`` in pixels.
+        sigma: range parameter in guide units.
+        weight_type: one of ``"exp"``, ``"iv1"``, ``"iv2"``, ``"cos"``, ``"jac"``, ``"off"``.
+        mask: optional ``(H, W)`` 0/1 array; masked-out pixels contribute no weight.
+        block_rows: rows per processing block.
+
+    Returns:
+        ``(H, W)`` filtered disparity, same dtype as ``disparity``.
+
+    Raises:
+        ValueError: on mismatched shapes, a non-positive radius, an unknown weight type.
+
+    References:
+        Tomasi & Manduchi, "Bilateral filtering for gray and color images", ICCV 1998 (the
+        joint bilateral weights); thesis Sec. 6.1 (the median it replaces).
+    """
+    disparity, guide, mask = _prepare(disparity, guide, mask, radius, weight_type, block_rows)
+    return _wmf(
+        disparity,
+        guide,
+        mask,
+        jnp.asarray(sigma, disparity.dtype),
+        radius=int(radius),
+        weight_type=weight_type,
+        iterations=1,
+        block_rows=int(min(block_rows, disparity.shape[0])),
+        statistic="mean",
     )

@@ -8,11 +8,10 @@ import jax.numpy as jnp
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
+from .._fields import check_fields, hyperparameter, static
 from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab
 from ..solve import SolverConfig, guide_edge_weights, solve_poisson
-
-_f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
 
 # Step filter across the point: the authors' 6 taps at offsets -3..-1, +1..+3 along n
 # (SPEC §2: [-1, -1.5, -2, 2, 1.5, 1] over 7 samples, the centre sample unused).
@@ -40,27 +39,25 @@ class SurfaceConfig(eqx.Module):
         blur_radius: support radius (pixels) of that blur (static).
         solver: configuration of the two Poisson solves.
 
+    Every array field is differentiable (the side chosen for each point is piecewise
+    constant; the labels, weights and solves are smooth).
+
     Raises:
+        TypeError: on a value of the wrong type.
         ValueError: on non-positive weights, ``ε``, offset or scale.
     """
 
-    data_weight: Array = eqx.field(converter=_f32, default=1e3)
-    smooth_scale: Array = eqx.field(converter=_f32, default=1.0)
-    smooth_eps: Array = eqx.field(converter=_f32, default=0.02)
-    gradient_sigma: Array = eqx.field(converter=_f32, default=2.5)
-    offset: Array = eqx.field(converter=_f32, default=1.0)
-    confidence_scale: Array = eqx.field(converter=_f32, default=0.05)
-    blur_radius: int = eqx.field(static=True, default=8)
+    data_weight: Array = hyperparameter(1e3, differentiable=True, lower=0.0, lower_open=True)
+    smooth_scale: Array = hyperparameter(1.0, differentiable=True, lower=0.0, lower_open=True)
+    smooth_eps: Array = hyperparameter(0.02, differentiable=True, lower=0.0, lower_open=True)
+    gradient_sigma: Array = hyperparameter(2.5, differentiable=True, lower=0.0, lower_open=True)
+    offset: Array = hyperparameter(1.0, differentiable=True, lower=0.0, lower_open=True)
+    confidence_scale: Array = hyperparameter(0.05, differentiable=True, lower=0.0, lower_open=True)
+    blur_radius: int = static(8, lower=1, upper=64)
     solver: SolverConfig = SolverConfig()
 
     def __check_init__(self):
-        for name in ("data_weight", "smooth_scale", "smooth_eps", "offset", "confidence_scale"):
-            try:
-                v = float(getattr(self, name))
-            except Exception:  # traced (e.g. under vmap over hyperparameters)
-                continue
-            if not v > 0:
-                raise ValueError(f"SurfaceConfig.{name} must be > 0; got {v}")
+        check_fields(self)
 
 
 class SurfaceResult(eqx.Module):

@@ -19,7 +19,7 @@ def test_hand_computed_variance():
     d[0, 0] = 0.3
     expect = 0.09 / 9 - (0.3 / 9) ** 2
     assert float(view_consistency(d)) == pytest.approx(expect, rel=1e-5)
-    assert float(view_consistency(d, (0, 0))) == pytest.approx(expect, rel=1e-5)
+    assert float(view_consistency(d, target=(0, 0))) == pytest.approx(expect, rel=1e-5)
     C, n = view_consistency(d, per_pixel=True)
     assert C.shape == (8, 10) and int(n.min()) == 9
     mask = np.ones((3, 3), bool)
@@ -85,7 +85,7 @@ def test_synthetic_gt_is_consistent_and_perturbations_are_not(gts):
 
 def test_jit_traced_target_and_bad_inputs(gts):
     gt = gts[1]
-    f = jax.jit(lambda d, t: view_consistency(d, t, per_pixel=True)[0])
+    f = jax.jit(lambda d, t: view_consistency(d, target=t, per_pixel=True)[0])
     C, _ = view_consistency(gt, per_pixel=True)
     np.testing.assert_allclose(f(gt, jnp.array([3, 4])), C, rtol=1e-6)
     assert not np.allclose(f(gt, jnp.array([0, 0])), C)
