@@ -25,21 +25,6 @@ Choices where the thesis leaves room (see the docstrings for details):
 from ..lightfield import ssim_map  # re-exported: the SSIM term of the loss
 from ._composite import RenderResult, render
 from ._config import RenderConfig
-from ._end_to_end import (
-    HPARAM_NAMES,
-    EndToEndConfig,
-    EndToEndParams,
-    EndToEndScene,
-    end_to_end_disparity,
-    end_to_end_loss,
-    end_to_end_prediction,
-    end_to_end_value_and_grad,
-    evaluate_scene,
-    prepare_scene,
-    soft_direction_maps,
-    soft_point_labels,
-    tune,
-)
 from ._loss import (
     LossConfig,
     edge_aware_smoothness,
@@ -71,19 +56,6 @@ from ._optimize import BLOCKS, OptimizeConfig, objective, optimize, params_from_
 from ._splat import SplatResult, label_kernel_1d, splat, weight_kernel
 
 __all__ = [
-    "HPARAM_NAMES",
-    "EndToEndConfig",
-    "EndToEndParams",
-    "EndToEndScene",
-    "end_to_end_disparity",
-    "end_to_end_loss",
-    "end_to_end_prediction",
-    "end_to_end_value_and_grad",
-    "evaluate_scene",
-    "prepare_scene",
-    "soft_direction_maps",
-    "soft_point_labels",
-    "tune",
     "BLOCKS",
     "DiffParams",
     "LossConfig",

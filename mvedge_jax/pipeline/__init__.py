@@ -34,6 +34,7 @@ from ._driver import optimize_steps as optimize_steps
 from ._outputs import epi_overlay as epi_overlay
 from ._outputs import quality_metrics as quality_metrics
 from ._outputs import write_outputs as write_outputs
+from ._sweep import sweep as sweep
 from ._tune import TuneScene as TuneScene
 from ._tune import chain_loss as chain_loss
 from ._tune import tune as tune
