@@ -90,19 +90,11 @@ def load_or_exit(
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 def main() -> None:
-    """mvedge: multi-view edge depth for 4D light fields (JAX)."""
-    _enable_compilation_cache()
+    """mvedge: multi-view edge depth for 4D light fields (JAX).
 
-
-def _enable_compilation_cache() -> None:
-    """Persist compiled stages across runs ($MVEDGE_JAX_CACHE, default ~/.cache/mvedge_jax)."""
-    import jax
-
-    cache = os.environ.get("MVEDGE_JAX_CACHE") or os.path.join(
-        os.path.expanduser("~"), ".cache", "mvedge_jax"
-    )
-    jax.config.update("jax_compilation_cache_dir", cache)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    Compiled stages are cached on disk ($MVEDGE_JAX_CACHE, default ~/.cache/mvedge_jax;
+    MVEDGE_JAX_CACHE=off disables it).
+    """
 
 
 def _fmt_range(lo: float, hi: float) -> str:

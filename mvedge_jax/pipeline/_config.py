@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._fields import field_spec
+from .._fields import as_float, field_spec
 from ..diff import ModelConfig, OptimizeConfig, RenderConfig
 from ..edges import EdgeConfig
 from ..reconstruct import ReconstructConfig
@@ -97,7 +97,8 @@ def get_path(config: eqx.Module, path: str):
 
 def replace_paths(config: eqx.Module, values: dict) -> eqx.Module:
     """``config`` with the fields at the dotted paths of ``values`` replaced (traceable: the
-    values may be tracers, so this works inside ``jit``, ``grad`` and ``vmap``).
+    values may be tracers, so this works inside ``jit``, ``grad`` and ``vmap``; numbers
+    become 0-d array leaves).
 
     Raises:
         AttributeError: on a path that names no field.
@@ -109,7 +110,9 @@ def replace_paths(config: eqx.Module, values: dict) -> eqx.Module:
     def where(c):
         return tuple(get_path(c, p) for p in paths)
 
-    return eqx.tree_at(where, config, tuple(values[p] for p in paths))
+    # Python numbers become array leaves (as the constructors make them): a number left as a
+    # Python scalar would be a compile-time constant of every jitted stage.
+    return eqx.tree_at(where, config, tuple(as_float(values[p]) for p in paths))
 
 
 def with_values(config: PipelineConfig, values: dict) -> PipelineConfig:

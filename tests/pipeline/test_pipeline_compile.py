@@ -1,0 +1,109 @@
+"""Compile once: the driver reuses compiled stages across calls and hyperparameter values; the
+library enables the persistent compilation cache; no host callbacks in the stages."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import mvedge_jax
+from mvedge_jax.edges import resolve_d_max
+from mvedge_jax.pipeline import (
+    STAGE_CACHE,
+    PipelineConfig,
+    edges_stage,
+    estimate_disparity,
+    estimate_disparity_arrays,
+    replace_paths,
+    sweep,
+)
+from mvedge_jax.synthetic import make_scene
+
+
+@pytest.fixture(scope="module")
+def small():
+    return make_scene(5, grid=(5, 5), size=(32, 32), disparity_range=(-1.0, 1.0), n_objects=2)
+
+
+def test_second_call_and_new_hyperparameters_do_not_recompile(small):
+    config = PipelineConfig()
+    first = estimate_disparity(small, config)
+    n = STAGE_CACHE.compilations
+    again = estimate_disparity(small, config)
+    changed = replace_paths(
+        config, {"reconstruct.omega": jnp.asarray(20.0), "edges.presmooth_sigma": 1.3}
+    )
+    other = estimate_disparity(small, changed)
+    assert STAGE_CACHE.compilations == n
+    assert again.compile_seconds == 0.0 and other.compile_seconds == 0.0
+    np.testing.assert_array_equal(np.asarray(again.disparity), np.asarray(first.disparity))
+    # the new values are used: the result changes and equals the pure chain's
+    assert not np.allclose(np.asarray(other.disparity), np.asarray(first.disparity))
+    chain = jax.jit(estimate_disparity_arrays, static_argnames="d_max")(
+        jnp.asarray(small.views),
+        changed,
+        key=jax.random.key(0),
+        d_max=resolve_d_max(changed.edges, small.disparity_range),
+    )
+    np.testing.assert_allclose(
+        np.asarray(other.disparity), np.asarray(chain.disparity), rtol=0, atol=1e-5
+    )
+
+
+def test_sweep_equals_separate_runs(small):
+    config = PipelineConfig()
+    d_max = resolve_d_max(config.edges, small.disparity_range)
+    omegas = np.array([20.0, 150.0, 600.0])
+    centres = sweep(
+        small.views,
+        config,
+        {"reconstruct.omega": omegas},
+        key=jax.random.key(0),
+        d_max=d_max,
+    )
+    assert centres.shape == (3, 32, 32)
+    for i, w in enumerate(omegas):
+        one = estimate_disparity(small, replace_paths(config, {"reconstruct.omega": w}))
+        np.testing.assert_allclose(
+            np.asarray(centres[i]), np.asarray(one.disparity[2, 2]), rtol=0, atol=1e-4
+        )
+    with pytest.raises(ValueError, match="static field"):
+        sweep(small.views, config, {"edges.n_filters": [3.0]}, key=jax.random.key(0), d_max=1.0)
+    with pytest.raises(ValueError, match="same length"):
+        sweep(
+            small.views,
+            config,
+            {"reconstruct.omega": [1.0, 2.0], "reconstruct.a": [1.0]},
+            key=jax.random.key(0),
+            d_max=1.0,
+        )
+
+
+def test_edges_stage_has_no_host_callback(small):
+    config = PipelineConfig()
+    views = jnp.asarray(small.views)
+    text = (
+        jax.jit(edges_stage, static_argnames="d_max")
+        .lower(views, config, key=jax.random.key(0), d_max=1.25)
+        .as_text()
+    )
+    assert "callback" not in text.lower()
+
+
+def test_library_enables_the_persistent_cache(tmp_path, monkeypatch):
+    before = jax.config.jax_compilation_cache_dir
+    try:
+        monkeypatch.setenv("MVEDGE_JAX_CACHE", "off")
+        jax.config.update("jax_compilation_cache_dir", None)
+        assert mvedge_jax.enable_compilation_cache() is None
+        assert jax.config.jax_compilation_cache_dir is None
+        monkeypatch.setenv("MVEDGE_JAX_CACHE", str(tmp_path / "c"))
+        assert mvedge_jax.enable_compilation_cache() == str(tmp_path / "c")
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "c")
+        # an existing setting is kept
+        monkeypatch.setenv("MVEDGE_JAX_CACHE", str(tmp_path / "other"))
+        assert mvedge_jax.enable_compilation_cache() == str(tmp_path / "c")
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)

@@ -1,0 +1,64 @@
+"""`tune`: Adam on the supervised loss through the chain, returning a usable PipelineConfig."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mvedge_jax.pipeline import (
+    PipelineConfig,
+    config_from_toml,
+    config_to_toml,
+    estimate_disparity,
+    get_path,
+    tune,
+)
+from mvedge_jax.synthetic import make_scene
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    kw = dict(grid=(5, 5), size=(32, 32), disparity_range=(-1.0, 1.0), n_objects=2)
+    return [make_scene(11, **kw)]
+
+
+def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
+    config = PipelineConfig()
+    fields = ["reconstruct.omega", "reconstruct.epi_c"]
+    seen = []
+    tuned, hist = tune(
+        config,
+        scenes,
+        fields=fields,
+        steps=4,
+        learning_rate=0.3,
+        callback=lambda step, rec: seen.append(step),
+    )
+    assert seen == [0, 1, 2, 3]
+    assert isinstance(tuned, PipelineConfig)
+    assert np.all(np.isfinite(hist["loss"])) and not hist["skipped"].any()
+    assert float(hist["final_loss"]) < float(hist["loss"][0])
+    for f in fields:
+        assert hist[f][0] == pytest.approx(float(get_path(config, f)))
+    assert float(tuned.reconstruct.omega) != float(config.reconstruct.omega)
+    assert float(tuned.reconstruct.omega) > 0 and float(tuned.reconstruct.epi_c) > 0
+    # what tune returns is what estimate_disparity and `mvedge depth --config` take
+    back = config_from_toml(config_to_toml(tuned))
+    assert float(back.reconstruct.omega) == pytest.approx(float(tuned.reconstruct.omega))
+    result = estimate_disparity(scenes[0], back)
+    assert np.isfinite(np.asarray(result.disparity)).all()
+
+
+def test_tune_rejects_bad_requests(scenes):
+    config = PipelineConfig()
+    with pytest.raises(ValueError, match="not differentiable"):
+        tune(config, scenes, fields=["edges.min_confidence"], steps=1)
+    with pytest.raises(ValueError, match="not differentiable"):
+        tune(config, scenes, fields=["reconstruct.nope"], steps=1)
+    with pytest.raises(ValueError, match="scenes is empty"):
+        tune(config, [], fields=["reconstruct.omega"], steps=1)
+    with pytest.raises(ValueError, match="steps"):
+        tune(config, scenes, fields=["reconstruct.omega"], steps=-1)
+    no_gt = scenes[0].__class__(views=scenes[0].views, view_mask=scenes[0].view_mask)
+    with pytest.raises(ValueError, match="no ground-truth"):
+        tune(config, [no_gt], fields=["reconstruct.omega"], steps=1)
