@@ -34,7 +34,8 @@ class FieldSpec:
     """What a config field accepts.
 
     Attributes:
-        kind: ``"hyperparameter"``, ``"int"``, ``"float"``, ``"bool"`` or ``"str"``.
+        kind: ``"hyperparameter"``, ``"vector"`` (a 1-D float array leaf of ``length``),
+            ``"int"``, ``"float"``, ``"bool"`` or ``"str"``.
         differentiable: for hyperparameters, whether the chain's output is a smooth function
             of the field (where its other, discrete decisions do not change).
         lower, upper: inclusive bounds (``None``: unbounded).
@@ -45,6 +46,7 @@ class FieldSpec:
 
     kind: str
     differentiable: bool = False
+    length: int | None = None
     lower: float | None = None
     upper: float | None = None
     lower_open: bool = False
@@ -86,6 +88,33 @@ def hyperparameter(
         lower_open=lower_open,
     )
     return eqx.field(default=default, converter=as_float, metadata={_META: spec})
+
+
+def as_float_vector(value: Any) -> Any:
+    """Converter of `hyperparameter_vector` fields: a sequence of real numbers becomes a 1-D
+    float array (see `as_float`); anything else is returned unchanged for `check_fields`."""
+    if isinstance(value, jax.core.Tracer | str | bytes) or value is None:
+        return value
+    arr = np.asarray(value)
+    if arr.ndim != 1 or not np.issubdtype(arr.dtype, np.number) or arr.dtype == bool:
+        return value
+    if np.issubdtype(arr.dtype, np.complexfloating):
+        return value
+    return jnp.asarray(arr.astype(float), dtype=jnp.result_type(float))
+
+
+def hyperparameter_vector(
+    default: tuple[float, ...],
+    *,
+    differentiable: bool,
+    lower: float | None = None,
+    upper: float | None = None,
+):
+    """A fixed-length vector of real hyperparameters stored as a 1-D array leaf."""
+    spec = FieldSpec(
+        "vector", differentiable=differentiable, length=len(default), lower=lower, upper=upper
+    )
+    return eqx.field(default=default, converter=as_float_vector, metadata={_META: spec})
 
 
 def static(
@@ -159,6 +188,19 @@ def check_value(where: str, value: Any, spec: FieldSpec) -> None:
         if not math.isfinite(v) and not (math.isinf(v) and v > 0 and spec.upper is None):
             raise ValueError(f"{where} must be finite; got {v}")
         _check_bounds(where, v, spec)
+        return
+    if spec.kind == "vector":
+        if isinstance(value, jax.core.Tracer):
+            return
+        if not isinstance(value, jax.Array | np.ndarray):
+            raise TypeError(f"{where} must be {spec.length} real numbers; got {value!r}")
+        if value.shape != (spec.length,):
+            raise ValueError(f"{where} must have shape ({spec.length},); got {tuple(value.shape)}")
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{where} must be finite; got {v.tolist()}")
+        for x in v:
+            _check_bounds(where, float(x), spec)
         return
     if spec.kind == "bool":
         if not isinstance(value, bool | np.bool_):

@@ -3,35 +3,9 @@
 from __future__ import annotations
 
 import equinox as eqx
-import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array
 
-
-def _scalar(value) -> Array:
-    return jnp.asarray(value)
-
-
-def _concrete(value):
-    """A NumPy copy of ``value`` or ``None`` while tracing (then no check is possible)."""
-    try:
-        return np.asarray(value)
-    except Exception:  # a tracer (vmap over hyperparameters)
-        return None
-
-
-def _check_positive(owner: str, **values) -> None:
-    for name, value in values.items():
-        v = _concrete(value)
-        if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
-            raise ValueError(f"{owner}.{name} must be finite and > 0; got {v}")
-
-
-def _check_nonnegative(owner: str, **values) -> None:
-    for name, value in values.items():
-        v = _concrete(value)
-        if v is not None and not (np.all(np.isfinite(v)) and np.all(v >= 0)):
-            raise ValueError(f"{owner}.{name} must be finite and >= 0; got {v}")
+from .._fields import check_fields, hyperparameter, static
 
 
 def _check_levels(levels) -> None:
@@ -42,7 +16,7 @@ def _check_levels(levels) -> None:
     try:
         caps = [c for c, _ in levels]
         fracs = [float(f) for _, f in levels]
-    except Exception as err:
+    except (TypeError, ValueError) as err:
         raise ValueError(f"{msg}; got {levels!r}") from err
     ok = bool(caps) and all(isinstance(c, int) and c >= 1 for c in caps)
     ok = ok and all(b > a for a, b in zip(caps, caps[1:], strict=False))
@@ -90,20 +64,20 @@ class RenderConfig(eqx.Module):
             ``Σ_p Σ_q T_before λ_p (D_q - Z_p)²`` up to a constant).
     """
 
-    sigma_label: Array = eqx.field(converter=_scalar, default=1.3)
-    sigma_weight: Array = eqx.field(converter=_scalar, default=0.71)
-    weight_order: int = eqx.field(static=True, default=2)
-    sigma_depth: Array = eqx.field(converter=_scalar, default=1.0)
-    density: Array = eqx.field(converter=_scalar, default=2.0)
-    depth_span: Array = eqx.field(converter=_scalar, default=3.0)
-    radius: int = eqx.field(static=True, default=3)
-    depth_samples: int = eqx.field(static=True, default=8)
-    tile_size: int = eqx.field(static=True, default=8)
+    sigma_label: Array = hyperparameter(1.3, differentiable=True, lower=0.0, lower_open=True)
+    sigma_weight: Array = hyperparameter(0.71, differentiable=True, lower=0.0, lower_open=True)
+    weight_order: int = static(2, lower=1, upper=16)
+    sigma_depth: Array = hyperparameter(1.0, differentiable=True, lower=0.0, lower_open=True)
+    density: Array = hyperparameter(2.0, differentiable=True, lower=0.0, lower_open=True)
+    depth_span: Array = hyperparameter(3.0, differentiable=True, lower=0.0, lower_open=True)
+    radius: int = static(3, lower=1, upper=64)
+    depth_samples: int = static(8, lower=0, upper=1024)
+    tile_size: int = static(8, lower=1, upper=1024)
     tile_levels: tuple[tuple[int, float], ...] = eqx.field(
         static=True, default=((48, 1.0), (96, 0.4), (200, 0.2))
     )
-    nearer: str = eqx.field(static=True, default="larger")
-    label_mix: str = eqx.field(static=True, default="weight")
+    nearer: str = static("larger", choices=("larger", "smaller"))
+    label_mix: str = static("weight", choices=("opacity", "weight"))
 
     @property
     def tile_capacity(self) -> int:
@@ -111,35 +85,10 @@ class RenderConfig(eqx.Module):
         return int(self.tile_levels[-1][0])
 
     def __check_init__(self):
-        _check_positive(
-            "RenderConfig",
-            sigma_label=self.sigma_label,
-            sigma_weight=self.sigma_weight,
-            sigma_depth=self.sigma_depth,
-            density=self.density,
-            depth_span=self.depth_span,
-        )
-        if not isinstance(self.weight_order, int) or self.weight_order < 1:
-            raise ValueError(
-                f"RenderConfig.weight_order must be an int >= 1; got {self.weight_order!r}"
-            )
-        if not isinstance(self.radius, int) or self.radius < 1:
-            raise ValueError(f"RenderConfig.radius must be an int >= 1; got {self.radius!r}")
-        if not isinstance(self.depth_samples, int) or self.depth_samples < 0:
-            raise ValueError(
-                f"RenderConfig.depth_samples must be an int >= 0; got {self.depth_samples!r}"
-            )
+        check_fields(self)
         if not isinstance(self.tile_size, int) or self.tile_size < 2 * self.radius + 1:
             raise ValueError(
                 f"RenderConfig.tile_size must be an int >= 2 * radius + 1 = "
                 f"{2 * self.radius + 1}; got {self.tile_size!r}"
             )
         _check_levels(self.tile_levels)
-        if self.label_mix not in ("opacity", "weight"):
-            raise ValueError(
-                f"RenderConfig.label_mix must be 'opacity' or 'weight'; got {self.label_mix!r}"
-            )
-        if self.nearer not in ("larger", "smaller"):
-            raise ValueError(
-                f"RenderConfig.nearer must be 'larger' or 'smaller'; got {self.nearer!r}"
-            )

@@ -7,8 +7,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._fields import check_fields, hyperparameter
 from ..lightfield import backward_warp, forward_project, ssim_dissimilarity
-from ._config import _check_nonnegative, _check_positive, _scalar
 
 
 class LossConfig(eqx.Module):
@@ -31,26 +31,19 @@ class LossConfig(eqx.Module):
         eps: ε of eq 7.15.
     """
 
-    photometric: Array = eqx.field(converter=_scalar, default=1.0)
-    ssim: Array = eqx.field(converter=_scalar, default=0.5)
-    smooth: Array = eqx.field(converter=_scalar, default=0.05)
-    gradient_reward: Array = eqx.field(converter=_scalar, default=0.05)
-    supervised: Array = eqx.field(converter=_scalar, default=1.0)
-    edge_sharpness: Array = eqx.field(converter=_scalar, default=10.0)
-    occlusion_tolerance: Array = eqx.field(converter=_scalar, default=0.25)
-    eps: Array = eqx.field(converter=_scalar, default=1e-3)
+    photometric: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    ssim: Array = hyperparameter(0.5, differentiable=True, lower=0.0)
+    smooth: Array = hyperparameter(0.05, differentiable=True, lower=0.0)
+    gradient_reward: Array = hyperparameter(0.05, differentiable=True, lower=0.0)
+    supervised: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    edge_sharpness: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
+    occlusion_tolerance: Array = hyperparameter(
+        0.25, differentiable=False, lower=0.0, lower_open=True
+    )
+    eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
 
     def __check_init__(self):
-        _check_nonnegative(
-            "LossConfig",
-            photometric=self.photometric,
-            ssim=self.ssim,
-            smooth=self.smooth,
-            gradient_reward=self.gradient_reward,
-            supervised=self.supervised,
-            edge_sharpness=self.edge_sharpness,
-        )
-        _check_positive("LossConfig", occlusion_tolerance=self.occlusion_tolerance, eps=self.eps)
+        check_fields(self)
 
 
 _DEFAULT_LOSS = LossConfig()

@@ -7,9 +7,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._fields import check_fields, hyperparameter
 from ..solve import SolverConfig, SolveResult, solve_poisson
 from ._composite import RenderResult, render
-from ._config import RenderConfig, _check_positive, _scalar
+from ._config import RenderConfig
 
 
 class ModelConfig(eqx.Module):
@@ -28,17 +29,13 @@ class ModelConfig(eqx.Module):
     """
 
     render: RenderConfig = RenderConfig()
-    label_weight: Array = eqx.field(converter=_scalar, default=100.0)
-    smoothness: Array = eqx.field(converter=_scalar, default=1.0)
-    q_scale: Array = eqx.field(converter=_scalar, default=10.0)
+    label_weight: Array = hyperparameter(100.0, differentiable=True, lower=0.0, lower_open=True)
+    smoothness: Array = hyperparameter(1.0, differentiable=True, lower=0.0, lower_open=True)
+    q_scale: Array = hyperparameter(10.0, differentiable=True)
     solver: SolverConfig = SolverConfig()
 
     def __check_init__(self):
-        _check_positive("ModelConfig", label_weight=self.label_weight, smoothness=self.smoothness)
-        if not isinstance(self.render, RenderConfig):
-            raise ValueError(f"ModelConfig.render must be a RenderConfig; got {self.render!r}")
-        if not isinstance(self.solver, SolverConfig):
-            raise ValueError(f"ModelConfig.solver must be a SolverConfig; got {self.solver!r}")
+        check_fields(self)
 
 
 _DEFAULT_MODEL = ModelConfig()

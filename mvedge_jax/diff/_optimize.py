@@ -13,18 +13,14 @@ import numpy as np
 import optax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._fields import check_fields, hyperparameter_vector, static
 from ..edges import EdgeSet
-from ._config import _concrete
 from ._loss import LossConfig, self_supervised_loss, supervised_loss
 from ._model import DiffParams, ModelConfig, initial_params, predict, sample_bilinear
 
 BLOCKS = ("label", "position", "R", "Q")
 
 _DEFAULT_MODEL = ModelConfig()
-
-
-def _vector4(value) -> Array:
-    return jnp.asarray(value, dtype=float)
 
 
 class OptimizeConfig(eqx.Module):
@@ -48,31 +44,20 @@ class OptimizeConfig(eqx.Module):
     model: ModelConfig = ModelConfig()
     loss: LossConfig = LossConfig()
     blocks: tuple[str, ...] = eqx.field(static=True, default=BLOCKS)
-    iterations: int = eqx.field(static=True, default=13)
-    passes: int = eqx.field(static=True, default=5)
-    learning_rate: Array = eqx.field(converter=_vector4, default=(0.015, 0.1, 0.015, 0.015))
-    decay: Array = eqx.field(converter=_vector4, default=(0.9, 0.75, 0.8, 0.9))
+    iterations: int = static(13, lower=0, upper=100_000)
+    passes: int = static(5, lower=0, upper=1000)
+    learning_rate: Array = hyperparameter_vector(
+        (0.015, 0.1, 0.015, 0.015), differentiable=True, lower=0.0
+    )
+    decay: Array = hyperparameter_vector((0.9, 0.75, 0.8, 0.9), differentiable=True, lower=0.0)
 
     def __check_init__(self):
+        check_fields(self)
         bad = [b for b in self.blocks if b not in BLOCKS]
         if bad or not self.blocks:
             raise ValueError(
                 f"OptimizeConfig.blocks must be names from {BLOCKS}; got {self.blocks}"
             )
-        if not isinstance(self.iterations, int) or self.iterations < 0:
-            raise ValueError(
-                f"OptimizeConfig.iterations must be an int >= 0; got {self.iterations!r}"
-            )
-        if not isinstance(self.passes, int) or self.passes < 0:
-            raise ValueError(f"OptimizeConfig.passes must be an int >= 0; got {self.passes!r}")
-        for name in ("learning_rate", "decay"):
-            v = _concrete(getattr(self, name))
-            if v is None:
-                continue
-            if v.shape != (4,):
-                raise ValueError(f"OptimizeConfig.{name} must have shape (4,); got {v.shape}")
-            if not (np.all(np.isfinite(v)) and np.all(v >= 0)):
-                raise ValueError(f"OptimizeConfig.{name} must be finite and >= 0; got {v}")
 
     def schedule(self) -> list[tuple[int, str, Array]]:
         """``[(pass, block, learning_rate), ...]`` in execution order."""
