@@ -14,9 +14,12 @@ stage is evaluated for every value (or every pair of values) of array leaves of
 - ``--stage centre`` (default): the centre-view diffusion `centre_disparity` (eqs 6.1–6.3),
   ``jax.vmap``-ed over the parameter values and compiled once ahead of time (``--batch-size B``
   uses ``jax.lax.map(..., batch_size=B)`` instead, to bound memory on large images).
-- ``--stage full``: the whole `reconstruct` (centre, refinement, weighted median, EPI inpainting,
-  off-cross-hair views), one jitted function called in a loop; first-call vs later-call times
-  and the jit cache size are printed as evidence that it compiled once.
+- ``--stage full``: the whole chain (`mvedge_jax.pipeline.sweep`: edges, surface vectors,
+  centre, refinement, weighted median, EPI inpainting, off-cross-hair views) ``vmap``-ed over
+  the values in one compiled program (``--batch-size B``: ``lax.map``), sharded over devices
+  when several exist; any differentiable or threshold field of the chain can be swept, named
+  by its dotted path (``edges.presmooth_sigma``; a bare name means ``reconstruct.<name>``).
+  The number of XLA compilations is printed as evidence that it compiled once.
 
 Metrics are those of the centre view against its ground truth (`depth_metrics`). A table
 (value(s), MSE×100, BadPix(0.07), Q25×100, seconds) is printed and a PNG is written into
@@ -38,10 +41,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mvedge_jax.edges import detect_edges
+from mvedge_jax.edges import detect_edges, resolve_d_max
 from mvedge_jax.io import load_light_field
 from mvedge_jax.metrics import depth_metrics
-from mvedge_jax.reconstruct import ReconstructConfig, centre_disparity, reconstruct
+from mvedge_jax.pipeline import (
+    PipelineConfig,
+    get_path,
+    hyperparameter_paths,
+    sweep,
+    with_values,
+)
+from mvedge_jax.reconstruct import ReconstructConfig, centre_disparity
 from mvedge_jax.surface import surface_vectors
 
 METRIC_KEYS = ("mse_x100", "badpix_0.07", "q25_x100")
@@ -97,15 +107,16 @@ def parse_values(text: str, param: str) -> np.ndarray:
         ValueError: on an empty list, a non-number, or a value the config rejects.
     """
     try:
-        vals = [float(s) for s in text.split(",") if s.strip()]
+        vals = [float(v) for v in text.split(",") if v.strip()]
     except ValueError as err:
         raise ValueError(
             f"--values for {param!r} must be comma-separated numbers; got {text!r}"
         ) from err
     if not vals:
         raise ValueError(f"no values given for {param!r}: {text!r}")
-    for v in vals:
-        ReconstructConfig(**{param: v})  # raises ValueError on e.g. negative weights
+    stage, _, name = param.rpartition(".")
+    for v in vals:  # raises ValueError on e.g. negative weights
+        with_values(PipelineConfig(), {f"{stage or 'reconstruct'}.{name}": v})
     return np.asarray(vals, np.float64)
 
 
@@ -150,40 +161,23 @@ def sweep_centre(edges, surface, centre_view, base, names, grid, batch_size=None
     return np.asarray(maps), t_compile, time.perf_counter() - t0
 
 
-def sweep_full(views, edges, surface, base, names, grid, counter: CompileCounter | None = None):
-    """`reconstruct` for every row of ``grid``; one jitted function called in a loop.
+def sweep_full(lf, paths: tuple[str, ...], grid, batch_size=None):
+    """The whole chain (`mvedge_jax.pipeline.sweep`: edges → surface vectors → reconstruction)
+    for every row of ``grid`` ``(K, P)`` in one compiled program (``vmap`` over the values, or
+    ``lax.map`` with ``batch_size``; sharded over devices when there are several).
 
     Returns:
-        ``(centre maps (K, H, W) numpy, seconds per call (K,), compilations per call (K,),
-        compile seconds per call (K,), jit cache size)``; the compile columns are 0 without a
-        ``counter``.
+        ``(centre maps (K, H, W) numpy, seconds of the call including its compilation)``.
     """
-    rc, cc = views.shape[0] // 2, views.shape[1] // 2
-    dtype = getattr(base, names[0]).dtype
-
-    @jax.jit
-    def run(vals, views, edges, surface):
-        cfg = with_params(base, names, tuple(vals[i] for i in range(len(names))))
-        return reconstruct(views, edges, surface, cfg).disparity[rc, cc]
-
-    counter = counter or CompileCounter()
-    maps, secs, n_comp, t_comp = [], [], [], []
-    for row in np.asarray(grid):
-        n0, c0 = counter.snapshot()
-        t0 = time.perf_counter()
-        d = jax.block_until_ready(run(np.asarray(row, dtype), views, edges, surface))
-        secs.append(time.perf_counter() - t0)
-        n1, c1 = counter.snapshot()
-        n_comp.append(n1 - n0)
-        t_comp.append(c1 - c0)
-        maps.append(np.asarray(d))
-    return (
-        np.stack(maps),
-        np.asarray(secs),
-        np.asarray(n_comp),
-        np.asarray(t_comp),
-        run._cache_size(),
+    config = PipelineConfig()
+    d_max = resolve_d_max(config.edges, lf.disparity_range)
+    values = {p: np.asarray(grid)[:, i] for i, p in enumerate(paths)}
+    t0 = time.perf_counter()
+    maps = sweep(
+        lf.views, config, values, key=jax.random.key(0), d_max=d_max, batch_size=batch_size
     )
+    maps = np.asarray(jax.block_until_ready(maps))
+    return maps, time.perf_counter() - t0
 
 
 def _log_axis(values: np.ndarray) -> bool:
@@ -274,13 +268,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--force", action="store_true", help="overwrite existing output files")
     args = ap.parse_args(argv)
 
-    allowed = sweepable_params()
     params = [args.param] + ([args.param2] if args.param2 else [])
     if (args.param2 is None) != (args.values2 is None):
         ap.error("--param2 and --values2 go together")
+    if args.stage == "full":
+        allowed = list(hyperparameter_paths())
+        params = [p if "." in p else f"reconstruct.{p}" for p in params]
+    else:
+        allowed = sweepable_params()
     for p in params:
         if p not in allowed:
-            ap.error(f"cannot sweep {p!r}; sweepable ReconstructConfig leaves: {allowed}")
+            ap.error(f"cannot sweep {p!r} at stage {args.stage}; sweepable: {allowed}")
     if len(set(params)) != len(params):
         ap.error("--param and --param2 must differ")
     try:
@@ -301,11 +299,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
 
-    jax.config.update(
-        "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache")
-    )
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-
     lf = load_light_field(args.scene, scale=args.scale)
     if lf.gt_disparity is None:
         print(f"error: {args.scene} has no ground-truth disparity", file=sys.stderr)
@@ -319,16 +312,19 @@ def main(argv: list[str] | None = None) -> int:
     )
 
     counter = CompileCounter().install()
-    t0 = time.perf_counter()
-    edges = detect_edges(lf)  # same defaults and key as `estimate_disparity`
-    surface = jax.jit(surface_vectors)(edges, lf.centre_view)
-    jax.block_until_ready(surface)
-    print(
-        f"edges + surface once: {time.perf_counter() - t0:.1f}s (incl. compilation), "
-        f"{int(edges.valid.sum())} edge points"
-    )
+    if args.stage == "centre":
+        t0 = time.perf_counter()
+        edges = detect_edges(lf)  # same defaults and key as `estimate_disparity`
+        surface = jax.jit(surface_vectors)(edges, lf.centre_view)
+        jax.block_until_ready(surface)
+        print(
+            f"edges + surface once: {time.perf_counter() - t0:.1f}s (incl. compilation), "
+            f"{int(edges.valid.sum())} edge points"
+        )
+    defaults = [
+        float(get_path(PipelineConfig(), p if "." in p else f"reconstruct.{p}")) for p in params
+    ]
     base = ReconstructConfig()
-    defaults = [float(getattr(base, p)) for p in params]
 
     n_before, _ = counter.snapshot()
     mesh = np.meshgrid(*values, indexing="ij")
@@ -361,23 +357,20 @@ def main(argv: list[str] | None = None) -> int:
             "run_seconds": t_run,
         }
     else:
-        maps, secs, n_comp, t_comp, cache = sweep_full(
-            lf.views, edges, surface, base, tuple(params), grid, counter
-        )
-        later = f"{np.median(secs[1:]):.1f}s" if K > 1 else "n/a"
+        paths = tuple(p if "." in p else f"reconstruct.{p}" for p in params)
+        maps, seconds = sweep_full(lf, paths, grid, batch_size=args.batch_size or None)
+        n_after, t_after = counter.snapshot()
+        secs = np.full(K, seconds / K)
+        names = counter.names[n_before:n_after]
         print(
-            f"full stage: first call {secs[0]:.1f}s ({n_comp[0]} XLA compilation(s), "
-            f"{t_comp[0]:.1f}s tracing+compiling), later calls median {later} with "
-            f"{int(n_comp[1:].sum())} compilations in total; jit cache entries after {K} "
-            f"calls: {cache} (1 = compiled once)"
+            f"full chain: {n_after - n_before} XLA compilation(s) for all {K} values "
+            f"({names}); {seconds:.1f}s in all including compilation"
         )
-        print(f"compiled during the loop: {counter.names[n_before:]}")
         evidence = {
-            "call_seconds": secs.tolist(),
-            "compilations_per_call": n_comp.tolist(),
-            "compiled": counter.names[n_before:],
-            "compile_seconds_per_call": t_comp.tolist(),
-            "jit_cache_size": int(cache),
+            "mode": "pipeline.sweep",
+            "compilations": n_after - n_before,
+            "compiled": names,
+            "seconds": seconds,
         }
 
     table = []
