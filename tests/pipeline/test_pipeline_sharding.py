@@ -1,0 +1,41 @@
+"""`sweep` shards its values over several devices (4 host CPU devices in a subprocess)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent(
+    """
+    import jax, numpy as np
+    from mvedge_jax.edges import resolve_d_max
+    from mvedge_jax.pipeline import PipelineConfig, sweep
+    from mvedge_jax.synthetic import make_scene
+
+    assert len(jax.devices()) == 4, jax.devices()
+    lf = make_scene(7, grid=(3, 3), size=(24, 24), disparity_range=(-1.0, 1.0), n_objects=1)
+    config = PipelineConfig()
+    d_max = resolve_d_max(config.edges, lf.disparity_range)
+    values = {"reconstruct.omega": np.array([10.0, 150.0, 900.0])}
+    kw = dict(key=jax.random.key(0), d_max=d_max)
+    sharded = sweep(lf.views, config, values, **kw)
+    single = sweep(lf.views, config, values, devices=jax.devices()[:1], **kw)
+    assert sharded.shape == (3, 24, 24), sharded.shape
+    np.testing.assert_allclose(np.asarray(sharded), np.asarray(single), rtol=0, atol=1e-5)
+    assert not np.allclose(np.asarray(sharded[0]), np.asarray(sharded[2]))
+    print("SHARDED-OK")
+    """
+)
+
+
+def test_sweep_shards_over_four_host_devices(tmp_path):
+    env = dict(os.environ)
+    env["XLA_FLAGS"] = env.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=4"
+    env["MVEDGE_JAX_CACHE"] = str(tmp_path / "cache")
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=1500
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "SHARDED-OK" in out.stdout
