@@ -8,6 +8,7 @@ dtype or static field compiles a new one.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -52,8 +53,9 @@ class StageCache:
 
         Returns:
             ``(run, compile_seconds)``: ``run()`` executes it on ``args`` (asynchronously:
-            use ``jax.block_until_ready`` on its output to time the work);
-            ``compile_seconds`` is 0 when the executable was reused.
+            use ``jax.block_until_ready`` on its output to time the work; ``run.func`` is
+            the ``jax.stages.Compiled`` executable); ``compile_seconds`` is 0 when the
+            executable was reused.
         """
         dyn, stat = eqx.partition(args, eqx.is_array)
         leaves, treedef = jax.tree.flatten(dyn)
@@ -74,7 +76,7 @@ class StageCache:
                 self._entries.popitem(last=False)
         else:
             self._entries.move_to_end(key)
-        return (lambda: compiled(dyn)), seconds
+        return functools.partial(compiled, dyn), seconds
 
 
 #: The cache of `estimate_disparity` and `optimize_disparity` (one per process).
