@@ -105,7 +105,8 @@ class EdgeConfig(eqx.Module):
         min_local_std: drop candidates whose 3x3 EPI colour standard deviation (LAB / 100) is
             lower (flat regions).
         variance_offset: pixels to either side of the edge at which colour is sampled.
-            Differentiable.
+            Not declared differentiable: it moves the grid minimum of the variance search
+            (piecewise), and the soft labels do not use it.
         max_colour_std: drop points whose best line still has a colour standard deviation
             along it (LAB / 100 units, less-varying side) above this; ``inf`` disables.
         outlier_tau: τ of eq 4.2. The thesis's 8e-5 belongs to its confidence scale; ours
@@ -178,7 +179,7 @@ class EdgeConfig(eqx.Module):
     min_ratio: Float[Array, ""] = hyperparameter(2.0, differentiable=False, lower=0.0)
     min_local_std: Float[Array, ""] = hyperparameter(0.0, differentiable=False, lower=0.0)
     variance_offset: Float[Array, ""] = hyperparameter(
-        1.5, differentiable=True, lower=0.0, lower_open=True
+        1.5, differentiable=False, lower=0.0, lower_open=True
     )
     max_colour_std: Float[Array, ""] = hyperparameter(
         float("inf"), differentiable=False, lower=0.0, lower_open=True

@@ -31,9 +31,6 @@ from mvedge_jax.solve import SolverConfig
 from mvedge_jax.synthetic import make_scene
 
 SMOOTH_PATHS = hyperparameter_paths(differentiable=True)
-#: Fields that only the hard edge labels use: zero in the soft chain, checked on the hard
-#: edge stage below.
-HARD_ONLY = ("edges.variance_offset",)
 #: Relative step of the central differences, and the tolerance of the comparison.
 REL_STEP = 1e-6
 RTOL = 1e-3
@@ -104,7 +101,7 @@ def _central_difference(f, values0, path):
     return (f(up) - f(down)) / (2 * h)
 
 
-@pytest.mark.parametrize("path", [p for p in SMOOTH_PATHS if p not in HARD_ONLY])
+@pytest.mark.parametrize("path", SMOOTH_PATHS)
 def test_chain_gradient_matches_finite_differences(chain, path):
     values0, f, grad = chain
     fd = _central_difference(f, values0, path)
@@ -113,14 +110,7 @@ def test_chain_gradient_matches_finite_differences(chain, path):
     assert abs(ad - fd) <= RTOL * max(abs(ad), abs(fd)), f"{path}: ad {ad:.6e} fd {fd:.6e}"
 
 
-def test_hard_only_fields_are_unused_by_the_soft_chain(chain):
-    values0, f, grad = chain
-    for path in HARD_ONLY:
-        assert grad[path] == 0.0
-        assert _central_difference(f, values0, path) == 0.0
-
-
-@pytest.mark.parametrize("path", ["edges.variance_offset", "edges.presmooth_sigma"])
+@pytest.mark.parametrize("path", ["edges.presmooth_sigma", "edges.edge_shift"])
 def test_hard_edge_labels_gradient_matches_finite_differences(scene, path):
     """The default (hard) labels are piecewise smooth: where no discrete choice flips, their
     gradient is exact."""
