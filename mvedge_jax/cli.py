@@ -13,12 +13,14 @@ import glob
 import os
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
-from .io import LayoutInfo, load_light_field_with_info
-from .lightfield import LightField
+if TYPE_CHECKING:  # the package imports JAX: `main` checks the platform first
+    from .io import LayoutInfo
+    from .lightfield import LightField
 
 
 class _ViewsParam(click.ParamType):
@@ -86,6 +88,8 @@ def load_or_exit(
     Returns:
         ``(light_field, info, seconds)``.
     """
+    from .io import load_light_field_with_info
+
     t0 = time.perf_counter()
     try:
         lf, info = load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)
@@ -116,7 +120,7 @@ def _check_platform() -> None:
         jax.devices()
     except (RuntimeError, AssertionError) as e:
         wanted = os.environ.get("JAX_PLATFORMS") or os.environ.get("JAX_PLATFORM_NAME")
-        detail = str(e).strip() or type(e).__name__
+        detail = str(e).strip() or "no installed JAX plugin provides it, or no device is visible"
         raise click.ClickException(
             f"JAX cannot start the requested platform (JAX_PLATFORMS={wanted!r}): {detail}. "
             f"For an NVIDIA GPU install the CUDA build with {_GPU_INSTALL}; "
