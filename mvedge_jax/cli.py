@@ -550,21 +550,19 @@ def depth(
     folders = _expand_paths(paths)
     formats = _Formats(hci=fmt == "hci", depth=want_depth, ply=ply)
     click.echo(_device_line())
+    job = functools.partial(
+        run_depth,
+        force=force,
+        config_path=config_path,
+        optimize=optimize,
+        seed=seed,
+        formats=formats,
+    )
     if len(folders) == 1:
         lf, info, seconds = load_or_exit(folders[0], views, scale, transpose)
         click.echo(f"loaded {folders[0]} in {seconds:.2f} s")
         camera = _camera_or_exit(read_hci_camera, info.folder, formats)
-        run_depth(
-            lf,
-            out or os.path.join("mvedge_out", lf.name),
-            force=force,
-            config_path=config_path,
-            optimize=optimize,
-            seed=seed,
-            formats=formats,
-            camera=camera,
-            load_info=info,
-        )
+        job(lf, out or os.path.join("mvedge_out", lf.name), camera=camera, load_info=info)
         return
     root = out or "mvedge_out"
     names = [os.path.basename(os.path.normpath(f)) for f in folders]
@@ -587,18 +585,7 @@ def depth(
         try:
             lf, info, _ = load_or_exit(f, views, scale, transpose)
             camera = _camera_or_exit(read_hci_camera, info.folder, formats)
-            m = run_depth(
-                lf,
-                dest,
-                force=force,
-                config_path=config_path,
-                optimize=optimize,
-                seed=seed,
-                formats=formats,
-                camera=camera,
-                load_info=info,
-                checked=True,
-            )
+            m = job(lf, dest, camera=camera, load_info=info, checked=True)
         except click.ClickException as e:
             click.echo(f"error: {f}: {e.format_message()}", err=True)
             rows.append({"scene": n, "status": f"failed: {e.format_message()}", "output": ""})

@@ -20,6 +20,7 @@ from ._driver import optimize_steps as optimize_steps
 from ._outputs import FIGURES as FIGURES
 from ._outputs import config_to_dict as config_to_dict
 from ._outputs import device_info as device_info
+from ._outputs import edge_epi_figure as edge_epi_figure
 from ._outputs import epi_overlay as epi_overlay
 from ._outputs import provenance as provenance
 from ._outputs import quality_metrics as quality_metrics

@@ -154,9 +154,11 @@ def config_to_dict(config) -> object:
     if isinstance(config, (int, np.integer)):
         return int(config)
     if isinstance(config, (float, np.floating)):
-        return _finite(float(config))
+        return _finite(float(str(config)))
     if isinstance(config, (jax.Array, np.ndarray)):
         a = np.asarray(config)
+        if a.dtype.kind == "f":  # shortest decimal of each value (0.15, not 0.15000000596)
+            a = np.array([float(str(v)) for v in a.ravel()]).reshape(a.shape)
         if a.dtype.kind in "biuf":
             return config_to_dict(a.item() if a.ndim == 0 else a.tolist())
     return repr(config)
@@ -280,7 +282,36 @@ def _edges_overlay(edges: EdgeSet, centre: np.ndarray, lo: float, hi: float) -> 
     return np.where(mask[..., None], viz.colorize_disparity(disp, vmin=lo, vmax=hi), grey)
 
 
-def _epi_figure(views, edges, direction: str, index: int, lo: float, hi: float):
+def edge_epi_figure(
+    views: np.ndarray,
+    edges: EdgeSet,
+    direction: str,
+    index: int,
+    *,
+    vmin: float,
+    vmax: float,
+):
+    """The figure of `epi_overlay`: the EPI with its edge lines as vectors, a title naming
+    the pixel row/column and the views, axes in pixels and views, and a disparity colour bar.
+
+    Args:
+        views: ``(U, V, H, W, 3)`` light field in [0, 1].
+        edges: the edge set.
+        direction: ``"horizontal"`` or ``"vertical"`` (as `epi_overlay`).
+        index: the pixel row (horizontal) or column (vertical).
+        vmin, vmax: disparity range of the line colours.
+
+    Returns:
+        ``(figure, metadata)`` of `viz.epi_figure` (write it with `viz.png_bytes`).
+
+    Raises:
+        ValueError: on an unknown direction or an index outside the image.
+
+    References:
+        Thesis Ch. 4.1 (EPI lines of multi-view edges).
+    """
+    views = np.asarray(views)
+    lo, hi = vmin, vmax
     epi, inter, d = _epi_lines(views, edges, direction, index)
     U, V = views.shape[:2]
     if direction == "horizontal":
@@ -420,32 +451,41 @@ def write_outputs(
         )
     tiles = disp.copy()
     tiles[~mask] = np.nan
-    _save(
-        writer,
-        "mosaic.png",
-        viz.image_figure(
-            viz.mosaic(tiles, fill=np.nan),
-            title=f"{name}: disparity of all {U}x{V} views (row u down, column v across)",
+
+    def disparity_coloured(image: np.ndarray, title: str):
+        return viz.image_figure(
+            image,
+            title=title,
             cmap=viz.DISPARITY_CMAP,
             vmin=lo,
             vmax=hi,
             label=viz.DISPARITY_LABEL,
+        )
+
+    _save(
+        writer,
+        "mosaic.png",
+        disparity_coloured(
+            viz.mosaic(tiles, fill=np.nan),
+            f"{name}: disparity of all {U}x{V} views (row u down, column v across)",
         ),
     )
     _save(
         writer,
         "edges_overlay.png",
-        viz.image_figure(
+        disparity_coloured(
             _edges_overlay(e, views[rc, cc], lo, hi),
-            title=f"{name}: {int(np.asarray(e.valid).sum())} edge points by disparity",
-            cmap=viz.DISPARITY_CMAP,
-            vmin=lo,
-            vmax=hi,
-            label=viz.DISPARITY_LABEL,
+            f"{name}: {int(np.asarray(e.valid).sum())} edge points by disparity",
         ),
     )
-    _save(writer, "epi_horizontal.png", _epi_figure(views, e, "horizontal", H // 2, lo, hi))
-    _save(writer, "epi_vertical.png", _epi_figure(views, e, "vertical", W // 2, lo, hi))
+    _save(
+        writer,
+        "epi_horizontal.png",
+        edge_epi_figure(views, e, "horizontal", H // 2, vmin=lo, vmax=hi),
+    )
+    _save(
+        writer, "epi_vertical.png", edge_epi_figure(views, e, "vertical", W // 2, vmin=lo, vmax=hi)
+    )
 
     metrics: dict = {
         "scene": name,
