@@ -21,9 +21,9 @@ def _cmap_distance(pixels: np.ndarray, cmap) -> tuple[np.ndarray, np.ndarray]:
     """Distance (0-255 RGB) of each pixel to the nearest colour of ``cmap``, and that colour's
     position in [0, 1]."""
     cm = matplotlib.colormaps[cmap] if isinstance(cmap, str) else cmap
-    ramp = cm(np.linspace(0, 1, 512))[:, :3] * 255
+    ramp = cm(np.linspace(0, 1, 256))[:, :3] * 255
     d = np.linalg.norm(pixels[:, None, :] - ramp[None], axis=-1)
-    return d.min(axis=1), d.argmin(axis=1) / 511
+    return d.min(axis=1), d.argmin(axis=1) / 255
 
 
 def _colour_bar_columns(img: np.ndarray, cmap, min_len: int) -> list[int]:
@@ -162,8 +162,9 @@ def test_epi_figure_draws_coloured_lines_and_says_which_row():
     )
     img, text = _png(fig_md)
     assert "row y = 5" in text["Title"]
-    x0 = int(text["colorbar_bbox"].split()[0])
-    dist, pos = _cmap_distance(img[:, : x0 - 5].reshape(-1, 3), viz.DISPARITY_CMAP)
+    x0, y0, _, y1 = (int(v) for v in text["colorbar_bbox"].split())
+    rows = img[(y0 + y1) // 2 - 3 : (y0 + y1) // 2 + 3, : x0 - 5]  # across the lines
+    dist, pos = _cmap_distance(rows.reshape(-1, 3), viz.DISPARITY_CMAP)
     on = dist < 20
     assert (pos[on] > 0.9).any() and (pos[on] < 0.1).any()  # both line colours present
 
