@@ -302,6 +302,7 @@ def run_depth(
     formats: _Formats = _Formats(),
     camera=None,
     load_info: LayoutInfo | None = None,
+    load_seconds: float | None = None,
     checked: bool = False,
 ) -> dict:
     """Run the main job on a loaded light field and write every output into ``out``.
@@ -311,8 +312,25 @@ def run_depth(
     metrics, ``optimize_seconds`` and ``loss_history``. One progress bar covers the stages,
     the optimisation steps, the propagation and the writing of the outputs.
 
+    Args:
+        lf: the light field.
+        out: output folder (replaced only with ``force``).
+        force: replace an existing ``out``.
+        config_path: optional TOML configuration (`_config_from_file`).
+        optimize: refine with `optimize_disparity`.
+        seed: seed of the PRNG key of the randomised line refinement.
+        formats: the optional field formats (HCI layout, depth, PLY).
+        camera: the scene's `HciCamera` (needed for depth and PLY).
+        load_info: the loader's `LayoutInfo` (scale and crop, for the provenance).
+        load_seconds: seconds the loading took (``provenance.seconds_load``).
+        checked: ``out`` was already validated (batch runs check every folder first).
+
     Returns:
         The metrics dictionary that was written to ``metrics.json``.
+
+    Raises:
+        click.ClickException: on an existing or misplaced ``out``, a bad configuration,
+            depth/PLY without a camera, or bad input.
     """
     import jax
     from tqdm import tqdm
@@ -362,6 +380,7 @@ def run_depth(
             views=None if load_info is None else _requested_views(load_info, lf),
             window=None if load_info is None else load_info.window,
         )
+        prov["seconds_load"] = load_seconds
         writer = OutputWriter(out)
         try:
             metrics = write_outputs(
@@ -562,7 +581,13 @@ def depth(
         lf, info, seconds = load_or_exit(folders[0], views, scale, transpose)
         click.echo(f"loaded {folders[0]} in {seconds:.2f} s")
         camera = _camera_or_exit(read_hci_camera, info.folder, formats)
-        job(lf, out or os.path.join("mvedge_out", lf.name), camera=camera, load_info=info)
+        job(
+            lf,
+            out or os.path.join("mvedge_out", lf.name),
+            camera=camera,
+            load_info=info,
+            load_seconds=seconds,
+        )
         return
     root = out or "mvedge_out"
     names = [os.path.basename(os.path.normpath(f)) for f in folders]
@@ -583,9 +608,9 @@ def depth(
         click.echo(f"[{i + 1}/{len(folders)}] {f}")
         dest = os.path.join(root, n)
         try:
-            lf, info, _ = load_or_exit(f, views, scale, transpose)
+            lf, info, seconds = load_or_exit(f, views, scale, transpose)
             camera = _camera_or_exit(read_hci_camera, info.folder, formats)
-            m = job(lf, dest, camera=camera, load_info=info, checked=True)
+            m = job(lf, dest, camera=camera, load_info=info, load_seconds=seconds, checked=True)
         except click.ClickException as e:
             click.echo(f"error: {f}: {e.format_message()}", err=True)
             rows.append({"scene": n, "status": f"failed: {e.format_message()}", "output": ""})

@@ -122,6 +122,7 @@ def test_batch_depth_over_a_glob_with_summary_and_formats(data_dir, tmp_path, fa
     for scene in ("antinous", "backgammon"):
         m = json.loads((out / scene / "metrics.json").read_text())
         assert m["provenance"]["scale"] == 0.125 and m["scene"] == scene
+        assert m["provenance"]["seconds_load"] > 0
         for f in ("centre_disparity.png", "centre_view.ply", f"disp_maps/{scene}.pfm"):
             assert (out / scene / f).is_file(), f
         np.testing.assert_array_equal(
