@@ -352,6 +352,12 @@ def run_depth(
     U, V = lf.grid
     H, W = lf.size
     click.echo(f"{lf.name}: {U}x{V} views of {H}x{W} px")
+    if formats.hci and load_info is not None and load_info.scale not in (None, 1.0):
+        click.echo(
+            f"warning: --format hci with --scale {load_info.scale:g}: the benchmark expects "
+            "full-resolution disparity maps",
+            err=True,
+        )
     total = len(STAGES) + 1 + (optimize_steps(config.optimize) + 1 if optimize else 0)
     bar = tqdm(total=total, desc=lf.name, unit="step", leave=True)
 

@@ -43,7 +43,8 @@ NO_DATA_RGB = (0, 0, 0)
 
 _DPI = 100
 _MIN_SIDE = 320  # small images are magnified (nearest) to this many pixels on the long side
-_MAX_SIDE = 2048  # large images (mosaics) are reduced to this many pixels on the long side
+MAX_SIDE = 2048
+"""Large images (mosaics) are shown at most this many pixels on the long side."""
 
 
 def colorize_disparity(
@@ -289,7 +290,7 @@ def image_figure(
         raise ValueError(f"colour range must be finite with vmax > vmin; got [{vmin}, {vmax}]")
     H, W = img.shape[:2]
     zoom = max(1.0, _MIN_SIDE / max(H, W))
-    zoom = min(zoom, _MAX_SIDE / max(H, W))
+    zoom = min(zoom, MAX_SIDE / max(H, W))
     w_px, h_px = max(1, round(W * zoom)), max(1, round(H * zoom), min_height)
     k = max(1.0, math.sqrt(min(w_px, h_px) / 400))  # text and margins grow with big images
     fs = 8 * k

@@ -9,6 +9,7 @@ import platform
 import time
 from collections.abc import Callable
 
+import cv2
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -267,6 +268,20 @@ def provenance(
     return out
 
 
+def _mosaic_tiles(disp: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """The views of the mosaic, reduced by an integer factor (area average) so that the
+    mosaic fits `viz.MAX_SIDE`; missing views are NaN."""
+    U, V, H, W = disp.shape
+    k = max(1, math.ceil(max(U * H, V * W) / (viz.MAX_SIDE - 2 * (max(U, V) - 1))))
+    h, w = max(1, H // k), max(1, W // k)
+    tiles = np.full((U, V, h, w), np.nan, np.float32)
+    for r in range(U):
+        for c in range(V):
+            if mask[r, c]:
+                tiles[r, c] = cv2.resize(disp[r, c], (w, h), interpolation=cv2.INTER_AREA)
+    return tiles, k
+
+
 def _save(writer: OutputWriter, name: str, fig_md) -> None:
     fig, md = fig_md
     writer.path(name).write_bytes(viz.png_bytes(fig, md))
@@ -449,8 +464,7 @@ def write_outputs(
                 vmax=hi,
             ),
         )
-    tiles = disp.copy()
-    tiles[~mask] = np.nan
+    tiles, reduced = _mosaic_tiles(disp, mask)
 
     def disparity_coloured(image: np.ndarray, title: str):
         return viz.image_figure(
@@ -467,7 +481,8 @@ def write_outputs(
         "mosaic.png",
         disparity_coloured(
             viz.mosaic(tiles, fill=np.nan),
-            f"{name}: disparity of all {U}x{V} views (row u down, column v across)",
+            f"{name}: disparity of all {U}x{V} views (row u down, column v across)"
+            + (f", each reduced {reduced}x" if reduced > 1 else ""),
         ),
     )
     _save(
