@@ -7,16 +7,20 @@ error messages.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import glob
 import os
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
-from .io import LayoutInfo, load_light_field_with_info
-from .lightfield import LightField
+if TYPE_CHECKING:  # the package imports JAX: `main` checks the platform first
+    from .io import LayoutInfo
+    from .lightfield import LightField
 
 
 class _ViewsParam(click.ParamType):
@@ -43,10 +47,9 @@ class _ViewsParam(click.ParamType):
 VIEWS = _ViewsParam()
 
 
-def light_field_options(fn: Callable) -> Callable:
-    """Decorator: the ``PATH`` argument and the ``--views/--scale/--transpose`` options."""
+def input_options(fn: Callable) -> Callable:
+    """Decorator: the ``--views/--scale/--transpose`` options (without the ``PATH`` argument)."""
 
-    @click.argument("path", type=click.Path(path_type=str))
     @click.option(
         "--views",
         type=VIEWS,
@@ -72,6 +75,11 @@ def light_field_options(fn: Callable) -> Callable:
     return wrapper
 
 
+def light_field_options(fn: Callable) -> Callable:
+    """Decorator: the ``PATH`` argument and the ``--views/--scale/--transpose`` options."""
+    return click.argument("path", type=click.Path(path_type=str))(input_options(fn))
+
+
 def load_or_exit(
     path: str, views=None, scale=None, transpose=None
 ) -> tuple[LightField, LayoutInfo, float]:
@@ -80,6 +88,8 @@ def load_or_exit(
     Returns:
         ``(light_field, info, seconds)``.
     """
+    from .io import load_light_field_with_info
+
     t0 = time.perf_counter()
     try:
         lf, info = load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)
@@ -95,6 +105,30 @@ def main() -> None:
     Compiled stages are cached on disk ($MVEDGE_JAX_CACHE, default ~/.cache/mvedge_jax;
     MVEDGE_JAX_CACHE=off disables it).
     """
+    _check_platform()
+
+
+_GPU_INSTALL = 'pip install -e ".[cuda]"'
+
+
+def _check_platform() -> None:
+    """Fail with a clear message when JAX cannot start the requested platform.
+
+    ``JAX_PLATFORMS=cuda`` on an install without the CUDA plugin otherwise fails at the
+    first JAX call with a bare AssertionError or RuntimeError.
+    """
+    import jax
+
+    try:
+        jax.devices()
+    except (RuntimeError, AssertionError) as e:
+        wanted = os.environ.get("JAX_PLATFORMS") or os.environ.get("JAX_PLATFORM_NAME")
+        detail = str(e).strip() or "no installed JAX plugin provides it, or no device is visible"
+        raise click.ClickException(
+            f"JAX cannot start the requested platform (JAX_PLATFORMS={wanted!r}): {detail}. "
+            f"For an NVIDIA GPU install the CUDA build with {_GPU_INSTALL}; "
+            "unset JAX_PLATFORMS to use the CPU."
+        ) from None
 
 
 def _fmt_range(lo: float, hi: float) -> str:
@@ -207,58 +241,117 @@ def _config_from_file(path: str | None):
 _SUMMARY_KEYS = ("mse_x100", "badpix_0.07", "q25_x100", "view_consistency")
 
 
-def _run_optimize(lf: LightField, result, config):
-    """`optimize_disparity` with a progress bar over the Adam steps (loss in the postfix)."""
-    from tqdm import tqdm
+def _device_line() -> str:
+    from .pipeline import device_info
 
+    d = device_info()
+    return (
+        f"device: {d['device']} (backend {d['backend']}, {d['device_count']} device(s), "
+        f"jax {d['jax_version']})"
+    )
+
+
+def _run_optimize(lf: LightField, result, config, bar):
+    """`optimize_disparity` with ``bar`` advanced per Adam step and once for the propagation."""
     from .diff import BLOCKS
     from .pipeline import optimize_disparity, optimize_steps
 
     total = optimize_steps(config.optimize)
-    bar = tqdm(total=total, desc="optimize", unit="step", leave=True)
-    bar.set_postfix_str("compile")
+    bar.set_postfix_str("compile optimize")
 
     def progress(step: int, info: dict) -> None:
         bar.update(1)
-        text = f"pass {info['pass'] + 1} {BLOCKS[info['block']]} loss {info['loss']:.5f}"
+        text = f"optimize pass {info['pass'] + 1} {BLOCKS[info['block']]} loss {info['loss']:.5f}"
         if step + 1 >= total:
-            text += ", propagating to every view"
+            text = "propagating to every view"
         bar.set_postfix_str(text)
 
     try:
-        return optimize_disparity(lf, result, config, progress=progress)
+        out = optimize_disparity(lf, result, config, progress=progress)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
-    finally:
-        bar.close()
+    bar.update(1)  # propagation
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class _Formats:
+    """The optional outputs of ``mvedge depth`` (`write_outputs`)."""
+
+    hci: bool = False
+    depth: bool = False
+    ply: bool = False
 
 
 def run_depth(
-    lf: LightField, out: str, *, force: bool, config_path: str | None, optimize: bool = False
+    lf: LightField,
+    out: str,
+    *,
+    force: bool,
+    config_path: str | None = None,
+    optimize: bool = False,
+    seed: int = 0,
+    formats: _Formats = _Formats(),
+    camera=None,
+    load_info: LayoutInfo | None = None,
+    load_seconds: float | None = None,
+    checked: bool = False,
 ) -> dict:
     """Run the main job on a loaded light field and write every output into ``out``.
 
     With ``optimize`` the Ch. 6 result is refined by the differentiable edge model
     (thesis Ch. 7, `optimize_disparity`); ``metrics.json`` then also holds the ``initial``
-    metrics, ``optimize_seconds`` and ``loss_history``.
+    metrics, ``optimize_seconds`` and ``loss_history``. One progress bar covers the stages,
+    the optimisation steps, the propagation and the writing of the outputs.
+
+    Args:
+        lf: the light field.
+        out: output folder (replaced only with ``force``).
+        force: replace an existing ``out``.
+        config_path: optional TOML configuration (`_config_from_file`).
+        optimize: refine with `optimize_disparity`.
+        seed: seed of the PRNG key of the randomised line refinement.
+        formats: the optional field formats (HCI layout, depth, PLY).
+        camera: the scene's `HciCamera` (needed for depth and PLY).
+        load_info: the loader's `LayoutInfo` (scale and crop, for the provenance).
+        load_seconds: seconds the loading took (``provenance.seconds_load``).
+        checked: ``out`` was already validated (batch runs check every folder first).
 
     Returns:
         The metrics dictionary that was written to ``metrics.json``.
+
+    Raises:
+        click.ClickException: on an existing or misplaced ``out``, a bad configuration,
+            depth/PLY without a camera, or bad input.
     """
+    import jax
     from tqdm import tqdm
 
     from .io import OutputWriter, check_output_dir
-    from .pipeline import STAGES, estimate_disparity, write_outputs
+    from .pipeline import STAGES, estimate_disparity, optimize_steps, provenance, write_outputs
 
-    try:
-        check_output_dir(out, lf.source, force=force)
-    except ValueError as e:
-        raise click.ClickException(str(e)) from None
+    if not checked:
+        try:
+            check_output_dir(out, lf.source, force=force)
+        except ValueError as e:
+            raise click.ClickException(str(e)) from None
+    if (formats.depth or formats.ply) and camera is None:
+        raise click.ClickException(
+            f"{lf.name}: --depth and --ply need the camera of an HCI 4D scene "
+            "(parameters.cfg); this input has none"
+        )
     config = _config_from_file(config_path)
     U, V = lf.grid
     H, W = lf.size
     click.echo(f"{lf.name}: {U}x{V} views of {H}x{W} px")
-    bar = tqdm(total=len(STAGES) * 2, desc="mvedge depth", unit="step", leave=True)
+    if formats.hci and load_info is not None and load_info.scale not in (None, 1.0):
+        click.echo(
+            f"warning: --format hci with --scale {load_info.scale:g}: the benchmark expects "
+            "full-resolution disparity maps",
+            err=True,
+        )
+    total = len(STAGES) + 1 + (optimize_steps(config.optimize) + 1 if optimize else 0)
+    bar = tqdm(total=total, desc=lf.name, unit="step", leave=True)
 
     def progress(stage: str, event: str) -> None:
         if event in ("compile", "run"):
@@ -266,32 +359,55 @@ def run_depth(
         else:
             bar.update(1)
 
-    t0 = time.perf_counter()
     try:
-        result = estimate_disparity(lf, config, progress=progress)
-    except ValueError as e:
-        bar.close()
-        raise click.ClickException(str(e)) from None
-    bar.close()
-    initial = info = None
-    if optimize:
-        initial = result
-        result, info = _run_optimize(lf, result, config)
-    total = time.perf_counter() - t0
-    writer = OutputWriter(out)
-    try:
-        metrics = write_outputs(
-            writer, lf, result, seconds_total=total, initial=initial, optimize_info=info
+        t0 = time.perf_counter()
+        try:
+            result = estimate_disparity(lf, config, key=jax.random.key(seed), progress=progress)
+        except ValueError as e:
+            raise click.ClickException(str(e)) from None
+        initial = info = None
+        if optimize:
+            initial = result
+            result, info = _run_optimize(lf, result, config, bar)
+        total_s = time.perf_counter() - t0
+        prov = provenance(
+            lf,
+            config,
+            seed=seed,
+            scale=None if load_info is None else load_info.scale,
+            views=None if load_info is None else _requested_views(load_info, lf),
+            window=None if load_info is None else load_info.window,
         )
-        writer.commit()
-    except BaseException:
-        writer.abort()
-        raise
+        prov["seconds_load"] = load_seconds
+        writer = OutputWriter(out)
+        try:
+            metrics = write_outputs(
+                writer,
+                lf,
+                result,
+                seconds_total=total_s,
+                initial=initial,
+                optimize_info=info,
+                provenance=prov,
+                hci=formats.hci,
+                camera=camera,
+                depth=formats.depth,
+                ply=formats.ply,
+                progress=lambda name: bar.set_postfix_str(f"write {name}"),
+            )
+            writer.commit()
+        except BaseException:
+            writer.abort()
+            raise
+        bar.update(1)
+        bar.set_postfix_str("done")
+    finally:
+        bar.close()
     click.echo(f"wrote {writer.out}")
     for k in _SUMMARY_KEYS + ("seconds_total", "compile_seconds"):
-        if k in metrics:
+        if metrics.get(k) is not None:
             line = f"  {k:<18} {metrics[k]:.4f}"
-            if k in metrics.get("initial", {}):
+            if metrics.get("initial", {}).get(k) is not None:
                 line += f"  (before optimisation {metrics['initial'][k]:.4f})"
             click.echo(line)
     for k, v in metrics["seconds_per_stage"].items():
@@ -305,6 +421,10 @@ def run_depth(
     return metrics
 
 
+def _requested_views(info: LayoutInfo, lf: LightField):
+    return None if info.window is None else tuple(lf.grid)
+
+
 _CONFIG_HELP = (
     "TOML file with [edges], [surface], [reconstruct], [optimize] parameter tables "
     "(sub-tables for nested configs, e.g. [optimize.loss])."
@@ -315,34 +435,209 @@ _OPTIMIZE_HELP = (
 )
 
 
+def _job_options(fn: Callable) -> Callable:
+    """Decorator: ``--force``, ``--config``, ``--optimize``, ``--seed``."""
+
+    @click.option("--force", is_flag=True, help="Replace existing output folders.")
+    @click.option(
+        "--config",
+        "config_path",
+        type=click.Path(path_type=str),
+        default=None,
+        help=_CONFIG_HELP,
+    )
+    @click.option("--optimize", is_flag=True, help=_OPTIMIZE_HELP)
+    @click.option(
+        "--seed",
+        type=int,
+        default=0,
+        show_default=True,
+        help="Seed of the randomised line refinement (stored in metrics.json).",
+    )
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def _expand_paths(paths: tuple[str, ...]) -> list[str]:
+    """Folders of the ``PATH...`` arguments; a quoted glob (``'data/hci4d/*/*'``) is expanded."""
+    out: list[str] = []
+    for p in paths:
+        if not os.path.exists(p) and glob.has_magic(p):
+            hits = sorted(h for h in glob.glob(p) if os.path.isdir(h))
+            if not hits:
+                raise click.ClickException(f"no folder matches {p!r}")
+            out += hits
+        else:
+            out.append(p)
+    return out
+
+
+def _summary_rows(rows: list[dict]) -> tuple[list[str], list[list[str]]]:
+    cols = ["scene", "status", *_SUMMARY_KEYS, "seconds_total", "output"]
+    table = []
+    for r in rows:
+        line = []
+        for c in cols:
+            v = r.get(c)
+            line.append("" if v is None else (f"{v:.4f}" if isinstance(v, float) else str(v)))
+        table.append(line)
+    return cols, table
+
+
+def _write_summary(out: str, rows: list[dict], scenes: dict[str, str], hci: bool) -> str:
+    """``summary/``: ``scenes.csv`` and ``scenes.md`` (one row per scene), and with ``hci``
+    the whole benchmark submission layout (``disp_maps/``, ``runtimes/``) of every scene."""
+    import csv
+    import io as _io
+    import shutil
+
+    from .io import OutputWriter
+
+    cols, table = _summary_rows(rows)
+    writer = OutputWriter(os.path.join(out, "summary"))
+    try:
+        buf = _io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerows([cols, *table])
+        writer.path("scenes.csv").write_text(buf.getvalue())
+        md = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        md += ["| " + " | ".join(line) + " |" for line in table]
+        writer.path("scenes.md").write_text("\n".join(md) + "\n")
+        if hci:
+            for name, folder in scenes.items():
+                for sub, ext in (("disp_maps", "pfm"), ("runtimes", "txt")):
+                    src = os.path.join(folder, sub, f"{name}.{ext}")
+                    if os.path.isfile(src):
+                        shutil.copyfile(src, writer.path(f"{sub}/{name}.{ext}"))
+        writer.commit()
+    except BaseException:
+        writer.abort()
+        raise
+    return str(writer.out)
+
+
 @main.command()
-@light_field_options
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=str))
+@input_options
 @click.option(
     "--out",
     type=click.Path(path_type=str),
     default=None,
-    help="Output folder (default: mvedge_out/<scene name>).",
+    help="Output folder (default: mvedge_out/<scene name>). With several PATHs: the parent "
+    "folder of one folder per scene and summary/ (default: mvedge_out).",
 )
-@click.option("--force", is_flag=True, help="Replace an existing output folder.")
+@_job_options
 @click.option(
-    "--config",
-    "config_path",
-    type=click.Path(path_type=str),
-    default=None,
-    help=_CONFIG_HELP,
+    "--format",
+    "fmt",
+    type=click.Choice(["mvedge", "hci"]),
+    default="mvedge",
+    show_default=True,
+    help="hci: also write the HCI 4D benchmark submission layout (disp_maps/<scene>.pfm, "
+    "runtimes/<scene>.txt).",
 )
-@click.option("--optimize", is_flag=True, help=_OPTIMIZE_HELP)
-def depth(path: str, views, scale, transpose, out, force, config_path, optimize) -> None:
-    """Disparity for every view of the light field in PATH (thesis Ch. 6, with --optimize
-    refined as in Ch. 7).
+@click.option(
+    "--depth",
+    "want_depth",
+    is_flag=True,
+    help="Also write metric depth (depth/view_RR_CC.pfm in metres, centre_depth.png); needs "
+    "an HCI 4D parameters.cfg.",
+)
+@click.option(
+    "--ply",
+    is_flag=True,
+    help="Also write centre_view.ply, the centre view's coloured point cloud (mm); needs an "
+    "HCI 4D parameters.cfg.",
+)
+def depth(
+    paths, views, scale, transpose, out, force, config_path, optimize, seed, fmt, want_depth, ply
+) -> None:
+    """Disparity for every view of the light field in each PATH (thesis Ch. 6, with
+    --optimize refined as in Ch. 7). PATH may be several folders or a quoted glob.
 
-    Writes per-view PFMs, disparity.npz, PNG colour maps, a mosaic of all views, EPIs with
-    the detected lines, and metrics.json (with error maps when ground truth exists).
+    Writes per-view PFMs, disparity.npz, figures with colour bars (centre disparity, a mosaic
+    of all views, edge points, EPIs with the detected lines, and with ground truth the error
+    and BadPix maps) and metrics.json (scores, timings, device, configuration). With several
+    PATHs, one folder per scene and summary/scenes.csv.
     """
-    lf, _, seconds = load_or_exit(path, views, scale, transpose)
-    click.echo(f"loaded {path} in {seconds:.2f} s")
-    out = out or os.path.join("mvedge_out", lf.name)
-    run_depth(lf, out, force=force, config_path=config_path, optimize=optimize)
+    from .io import check_output_dir, read_hci_camera
+
+    folders = _expand_paths(paths)
+    formats = _Formats(hci=fmt == "hci", depth=want_depth, ply=ply)
+    click.echo(_device_line())
+    job = functools.partial(
+        run_depth,
+        force=force,
+        config_path=config_path,
+        optimize=optimize,
+        seed=seed,
+        formats=formats,
+    )
+    if len(folders) == 1:
+        lf, info, seconds = load_or_exit(folders[0], views, scale, transpose)
+        click.echo(f"loaded {folders[0]} in {seconds:.2f} s")
+        camera = _camera_or_exit(read_hci_camera, info.folder, formats)
+        job(
+            lf,
+            out or os.path.join("mvedge_out", lf.name),
+            camera=camera,
+            load_info=info,
+            load_seconds=seconds,
+        )
+        return
+    root = out or "mvedge_out"
+    names = [os.path.basename(os.path.normpath(f)) for f in folders]
+    dupes = sorted({n for n in names if names.count(n) > 1} | ({"summary"} & set(names)))
+    if dupes:
+        raise click.ClickException(
+            f"scene folder names must be unique and not 'summary' (one output folder each); "
+            f"repeated or reserved: {', '.join(dupes)}"
+        )
+    try:
+        for f, n in zip(folders, names, strict=True):
+            check_output_dir(os.path.join(root, n), f, force=force)
+        check_output_dir(os.path.join(root, "summary"), None, force=force)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+    rows, written = [], {}
+    for i, (f, n) in enumerate(zip(folders, names, strict=True)):
+        click.echo(f"[{i + 1}/{len(folders)}] {f}")
+        dest = os.path.join(root, n)
+        try:
+            lf, info, seconds = load_or_exit(f, views, scale, transpose)
+            camera = _camera_or_exit(read_hci_camera, info.folder, formats)
+            m = job(lf, dest, camera=camera, load_info=info, load_seconds=seconds, checked=True)
+        except click.ClickException as e:
+            click.echo(f"error: {f}: {e.format_message()}", err=True)
+            rows.append({"scene": n, "status": f"failed: {e.format_message()}", "output": ""})
+            continue
+        rows.append({"scene": n, "status": "ok", "output": dest, **m})
+        written[n] = dest
+    summary = _write_summary(root, rows, written, formats.hci)
+    cols, table = _summary_rows(rows)
+    click.echo(f"wrote {summary}")
+    widths = [max(len(c), *(len(r[j]) for r in table)) for j, c in enumerate(cols[:-1])]
+    for line in [cols[:-1]] + [r[:-1] for r in table]:
+        click.echo("  ".join(v.ljust(w) for v, w in zip(line, widths, strict=True)))
+    failed = [r["scene"] for r in rows if r["status"] != "ok"]
+    if failed:
+        raise click.ClickException(f"{len(failed)} of {len(rows)} scenes failed: {failed}")
+
+
+def _camera_or_exit(read, folder: str, formats: _Formats):
+    if not (formats.depth or formats.ply):
+        return None
+    try:
+        camera = read(folder)
+    except (FileNotFoundError, ValueError) as e:
+        raise click.ClickException(str(e)) from None
+    if camera is None:
+        raise click.ClickException(
+            f"--depth and --ply need an HCI 4D parameters.cfg with the camera; {folder} has none"
+        )
+    return camera
 
 
 @main.command()
@@ -353,21 +648,14 @@ def depth(path: str, views, scale, transpose, out, force, config_path, optimize)
     show_default=True,
     help="Output folder.",
 )
-@click.option("--force", is_flag=True, help="Replace an existing output folder.")
-@click.option(
-    "--config",
-    "config_path",
-    type=click.Path(path_type=str),
-    default=None,
-    help=_CONFIG_HELP,
-)
-@click.option("--optimize", is_flag=True, help=_OPTIMIZE_HELP)
-def demo(out, force, config_path, optimize) -> None:
+@_job_options
+def demo(out, force, config_path, optimize, seed) -> None:
     """Run the main job on the embedded synthetic light field (ground truth for every view)."""
     from .synthetic import default_light_field
 
+    click.echo(_device_line())
     lf = default_light_field()
-    metrics = run_depth(lf, out, force=force, config_path=config_path, optimize=optimize)
+    metrics = run_depth(lf, out, force=force, config_path=config_path, optimize=optimize, seed=seed)
     if "all_views" in metrics:
         a = metrics["all_views"]
         line = (
@@ -401,6 +689,154 @@ def config_command(dump: bool, config_path: str | None) -> None:
     if not dump:
         raise click.UsageError("nothing to do; pass --dump to print the configuration")
     click.echo(config_to_toml(_config_from_file(config_path)), nl=False)
+
+
+#: Pixels excluded at each image border by the HCI 4D benchmark protocol (at 512 × 512).
+HCI_BORDER = 15
+
+
+def _read_disparity_file(path: str) -> np.ndarray:
+    """A 2-D disparity map from ``.pfm``, ``.npy`` or ``.npz`` (``disparity``: its centre view
+    when it holds every view, as the ``disparity.npz`` of ``mvedge depth``)."""
+    from .io import read_pfm
+
+    ext = os.path.splitext(path)[1].lower()
+    if not os.path.isfile(path):
+        raise click.ClickException(f"file not found: {path}")
+    try:
+        if ext == ".pfm":
+            a = read_pfm(path)
+        elif ext == ".npy":
+            a = np.load(path, allow_pickle=False)
+        elif ext == ".npz":
+            with np.load(path, allow_pickle=False) as z:
+                if "disparity" not in z:
+                    raise click.ClickException(f"{path} holds no 'disparity' array: {list(z)}")
+                a = z["disparity"]
+            if a.ndim == 4:
+                a = a[a.shape[0] // 2, a.shape[1] // 2]
+        else:
+            raise click.ClickException(
+                f"unknown disparity format {ext!r} of {path}; use .pfm, .npy or .npz"
+            )
+    except (ValueError, OSError) as e:
+        raise click.ClickException(f"cannot read {path}: {e}") from None
+    a = np.asarray(a)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim != 2:
+        raise click.ClickException(f"{path}: expected a 2-D disparity map; got shape {a.shape}")
+    return a.astype(np.float32)
+
+
+def _read_gt(path: str) -> tuple[np.ndarray, np.ndarray | None]:
+    """Ground truth from a file, or the centre-view GT (and mask) of a light-field folder."""
+    if os.path.isdir(path):
+        lf, _, _ = load_or_exit(path)
+        if lf.gt_disparity is None:
+            raise click.ClickException(f"{path} has no ground truth")
+        rc, cc = lf.centre_index
+        return np.asarray(lf.gt_disparity[rc, cc]), np.asarray(lf.gt_mask[rc, cc])
+    return _read_disparity_file(path), None
+
+
+def evaluate_disparity(
+    pred: np.ndarray, gt: np.ndarray, gt_mask: np.ndarray | None = None, border: int = HCI_BORDER
+) -> dict:
+    """Score a centre-view disparity map against ground truth, two ways.
+
+    ``full_frame``: every pixel with valid ground truth; ``hci_protocol``: the same with a
+    ``border``-pixel frame excluded, as the HCI 4D benchmark toolkit does (15 px at 512²).
+    Pixels where the prediction is not finite are excluded and counted.
+
+    Args:
+        pred, gt: ``(H, W)`` disparity in pixels per view step.
+        gt_mask: optional ``(H, W)`` bool of valid ground truth.
+        border: pixels excluded at each side for ``hci_protocol``.
+
+    Returns:
+        ``{"full_frame": depth_metrics, "hci_protocol": depth_metrics, "pixels",
+        "invalid_prediction_pixels", "border"}``.
+
+    Raises:
+        click.ClickException: on different shapes, or no pixel left to score.
+
+    References:
+        Honauer et al., ACCV 2016 (metrics and the 15-px evaluation border of the toolkit);
+        thesis Sec. 6.2.3.
+    """
+    from .metrics import depth_metrics
+
+    if pred.shape != gt.shape:
+        raise click.ClickException(
+            f"prediction shape {pred.shape} differs from ground-truth shape {gt.shape}"
+        )
+    H, W = gt.shape
+    valid = np.isfinite(gt) & (np.ones_like(gt, bool) if gt_mask is None else gt_mask)
+    finite = np.isfinite(pred)
+    m_full = valid & finite
+    m_hci = m_full.copy()
+    b = max(0, int(border))
+    if 2 * b >= min(H, W):
+        raise click.ClickException(f"border {b} px leaves nothing of a {H}x{W} map")
+    frame = np.zeros_like(m_hci)
+    frame[b : H - b, b : W - b] = True
+    m_hci &= frame
+    if not m_hci.any():
+        raise click.ClickException("no pixel with valid ground truth and a finite prediction")
+    p, g = np.where(finite, pred, 0.0), np.where(np.isfinite(gt), gt, 0.0)
+    return {
+        "full_frame": depth_metrics(p, g, m_full),
+        "hci_protocol": depth_metrics(p, g, m_hci),
+        "pixels": {"full_frame": int(m_full.sum()), "hci_protocol": int(m_hci.sum())},
+        "invalid_prediction_pixels": int((valid & ~finite).sum()),
+        "border": b,
+    }
+
+
+@main.command(name="eval")
+@click.argument("pred", type=click.Path(path_type=str))
+@click.argument("gt", type=click.Path(path_type=str))
+@click.option(
+    "--border",
+    type=click.IntRange(0),
+    default=HCI_BORDER,
+    show_default=True,
+    help="Pixels excluded at each side in the HCI protocol (15 at 512x512; scale it with "
+    "the map, e.g. 8 at 256x256).",
+)
+@click.option("--json", "as_json", is_flag=True, help="Print the scores as JSON.")
+def eval_cmd(pred: str, gt: str, border: int, as_json: bool) -> None:
+    """Score the disparity map PRED against ground truth GT: MSE×100, BadPix, Q25×100.
+
+    PRED: .pfm, .npy, or the disparity.npz of mvedge depth (its centre view). GT: the same
+    formats, or a light-field folder with ground truth (its centre view and mask). Both
+    protocols: the full frame, and the HCI 4D benchmark's with a 15-px border excluded.
+    """
+    import json
+
+    p = _read_disparity_file(pred)
+    g, gm = _read_gt(gt)
+    scores = evaluate_disparity(p, g, gm, border)
+    if as_json:
+        from .pipeline import strict_json
+
+        click.echo(json.dumps(strict_json(scores), indent=2, allow_nan=False))
+        return
+    keys = list(scores["full_frame"])
+    click.echo(f"{'metric':<14} {'full frame':>12} {'HCI (border ' + str(border) + ')':>16}")
+    for k in keys:
+        click.echo(f"{k:<14} {scores['full_frame'][k]:>12.4f} {scores['hci_protocol'][k]:>16.4f}")
+    click.echo(
+        f"{'pixels':<14} {scores['pixels']['full_frame']:>12d} "
+        f"{scores['pixels']['hci_protocol']:>16d}"
+    )
+    if scores["invalid_prediction_pixels"]:
+        click.echo(
+            f"warning: {scores['invalid_prediction_pixels']} pixels of PRED are NaN/Inf and "
+            "were not scored",
+            err=True,
+        )
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,5 +1,10 @@
 """File formats: HCI 4D, old HCI, view grids, PFM, PNG. The only package that touches files."""
 
+from ._camera import HciCamera as HciCamera
+from ._camera import depth_to_points as depth_to_points
+from ._camera import disparity_to_depth as disparity_to_depth
+from ._camera import read_hci_camera as read_hci_camera
+from ._camera import write_ply as write_ply
 from ._colmap import ColmapCamera as ColmapCamera
 from ._colmap import ColmapImage as ColmapImage
 from ._colmap import ColmapModel as ColmapModel

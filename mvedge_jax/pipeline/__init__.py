@@ -31,8 +31,14 @@ from ._driver import cross_hair_others as cross_hair_others
 from ._driver import estimate_disparity as estimate_disparity
 from ._driver import optimize_disparity as optimize_disparity
 from ._driver import optimize_steps as optimize_steps
+from ._outputs import FIGURES as FIGURES
+from ._outputs import config_to_json as config_to_json
+from ._outputs import device_info as device_info
+from ._outputs import edge_epi_figure as edge_epi_figure
 from ._outputs import epi_overlay as epi_overlay
+from ._outputs import provenance as provenance
 from ._outputs import quality_metrics as quality_metrics
+from ._outputs import strict_json as strict_json
 from ._outputs import write_outputs as write_outputs
 from ._sweep import sweep as sweep
 from ._tune import TuneScene as TuneScene
