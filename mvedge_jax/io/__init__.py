@@ -26,5 +26,8 @@ from ._orient import ParallaxCheck as ParallaxCheck
 from ._orient import check_parallax_axes as check_parallax_axes
 from ._pfm import read_pfm as read_pfm
 from ._pfm import write_pfm as write_pfm
+from ._results import OUTPUT_MARKER as OUTPUT_MARKER
+from ._results import OutputError as OutputError
 from ._results import OutputWriter as OutputWriter
 from ._results import check_output_dir as check_output_dir
+from ._results import is_output_folder as is_output_folder
