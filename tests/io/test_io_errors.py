@@ -14,7 +14,7 @@ from mvedge_jax.io import (
     write_pfm,
 )
 
-H, W = 32, 40
+H, W = 16, 20
 
 
 def test_missing_folder(tmp_path):
@@ -256,6 +256,7 @@ def test_specific_readers_reject_other_layouts(tmp_path, synth):
 
 
 def test_input_folder_is_never_written(tmp_path, synth):
+    H, W = 32, 40  # scale 0.5 keeps the views above MIN_VIEW_SIZE
     gt = np.ones((H, W), np.float32)
     folders = [
         synth.hci4d(tmp_path / "h", synth.views(9, 9, H, W), gt=gt),
