@@ -17,6 +17,7 @@ from ..lightfield import LightField
 from ..reconstruct import Reconstruction, propagate, select_centre, sharpen
 from ..surface import SurfaceResult
 from ._chain import _stage_fns
+from ._checks import check_compiled_memory, check_memory, diagnose
 from ._config import PipelineConfig
 
 
@@ -31,6 +32,8 @@ class Result(eqx.Module):
         seconds_per_stage: wall seconds per stage after compilation (``edges``, ``surface``,
             ``reconstruct``; ``optimize`` after `optimize_disparity`).
         compile_seconds: total ahead-of-time compilation seconds.
+        diagnostics: ``warnings`` (list of str: almost no edge points, unconverged solves)
+            and ``solver`` (status per stage) from `diagnose`.
     """
 
     disparity: Float[Array, "U V H W"]
@@ -39,6 +42,7 @@ class Result(eqx.Module):
     reconstruction: Reconstruction
     seconds_per_stage: dict[str, float] = eqx.field(static=True)
     compile_seconds: float = eqx.field(static=True)
+    diagnostics: dict = eqx.field(static=True, default_factory=dict)
 
 
 def estimate_disparity(
@@ -65,12 +69,16 @@ def estimate_disparity(
         A `Result` with ``disparity`` of shape ``(U, V, H, W)``.
 
     Raises:
-        ValueError: if the views contain NaN/Inf.
+        ValueError: if the views contain NaN/Inf, no edge point is found, or the result
+            holds NaN/Inf.
+        ConfigError: (a `ValueError`) if a stage would not fit in memory (checked before
+            anything is allocated, and again on each compiled stage).
     """
     config = PipelineConfig() if config is None else config
     key = jax.random.key(0) if key is None else key
     if not bool(jnp.isfinite(lf.views).all()):
         raise ValueError(f"light field {lf.name!r} contains NaN or Inf pixel values")
+    check_memory(config, lf.grid, lf.size, lf.disparity_range)
     edges_fn, surface_fn, reconstruct_fn = _stage_fns(config, lf.disparity_range)
     centre = lf.centre_view
     seconds: dict[str, float] = {}
@@ -83,6 +91,7 @@ def estimate_disparity(
         t0 = time.perf_counter()
         compiled = jax.jit(fn).lower(*args).compile()
         compile_total += time.perf_counter() - t0
+        check_compiled_memory(stage, compiled)
         if progress:
             progress(stage, "run")
         t0 = time.perf_counter()
@@ -102,6 +111,7 @@ def estimate_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=compile_total,
+        diagnostics=diagnose(lf, config, edges, surface, rec.disparity),
     )
 
 
@@ -301,6 +311,7 @@ def optimize_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=result.compile_seconds + compile_seconds,
+        diagnostics=result.diagnostics,
     )
     info = {
         "optimize_seconds": optimize_seconds,

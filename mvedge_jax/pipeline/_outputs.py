@@ -82,6 +82,13 @@ def quality_metrics(lf: LightField, disparity: np.ndarray) -> dict:
     return metrics
 
 
+def result_diagnostics(result: Result) -> dict:
+    """``warnings`` (always a list) and ``solver`` (status per stage) of a `Result`."""
+    diag = dict(result.diagnostics)
+    diag["warnings"] = list(diag.get("warnings", []))
+    return diag
+
+
 def write_outputs(
     writer: OutputWriter,
     lf: LightField,
@@ -110,7 +117,8 @@ def write_outputs(
 
     Returns:
         The metrics: ``seconds_total``, ``compile_seconds``, ``seconds_per_stage``,
-        ``view_consistency``, ``n_views``, ``n_edge_points``, ``n_dropped_points``, and with
+        ``view_consistency``, ``n_views``, ``n_edge_points``, ``n_dropped_points``,
+        ``warnings`` and ``solver`` (`result_diagnostics`), and with
         ground truth of the centre view ``mse_x100``, ``badpix_0.01/0.03/0.07``,
         ``q25_x100`` (+ ``all_views``: the mean over every view with ground truth). With
         ``initial``: ``initial``, the same quality metrics (`quality_metrics`) of the Ch. 6
@@ -173,6 +181,7 @@ def write_outputs(
         "n_dropped_points": int(np.asarray(e.n_dropped)),
     }
     metrics.update(quality_metrics(lf, disp))
+    metrics.update(result_diagnostics(result))
     if lf.gt_disparity is not None:
         gt = np.asarray(lf.gt_disparity)
         gtm = np.asarray(lf.gt_mask)
