@@ -7,10 +7,14 @@ error messages.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Iterator
 
 import click
 import numpy as np
@@ -82,10 +86,20 @@ def load_or_exit(
     """
     t0 = time.perf_counter()
     try:
-        lf, info = load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)
-    except (FileNotFoundError, NotADirectoryError, ValueError) as e:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            lf, info = load_light_field_with_info(
+                path, views=views, scale=scale, transpose=transpose
+            )
+    except (FileNotFoundError, NotADirectoryError, PermissionError, ValueError) as e:
         raise click.ClickException(str(e)) from None
+    _echo_warnings(str(w.message) for w in caught)
     return lf, info, time.perf_counter() - t0
+
+
+def _echo_warnings(messages) -> None:
+    for m in messages:
+        click.secho(f"warning: {m}", fg="yellow", err=True)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -204,12 +218,81 @@ def _config_from_file(path: str | None):
             data = tomllib.load(f)
     except FileNotFoundError:
         raise click.ClickException(f"config file not found: {path}") from None
-    except tomllib.TOMLDecodeError as e:
+    except IsADirectoryError:
+        raise click.ClickException(f"config file {path} is a folder, not a TOML file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise click.ClickException(f"config file {path} is not valid TOML: {e}") from None
+    except OSError as e:
+        raise click.ClickException(f"cannot read config file {path}: {e}") from None
     try:
-        return config_from_dict(data)
+        return config_from_dict(data, source=path)
     except (TypeError, ValueError) as e:
         raise click.ClickException(f"bad config file {path}: {e}") from None
+
+
+def _check_config_early(config_path: str | None, path: str, views, scale) -> None:
+    """Parse the config and bound its memory need from the folder's layout, before any
+    pixel is read."""
+    from .pipeline._checks import check_memory_before_loading
+
+    config = _config_from_file(config_path)
+    try:
+        check_memory_before_loading(config, path, views=views, scale=scale)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+
+
+def _scene_name(path: str) -> str:
+    """The light field's name (its folder's name) without reading pixels."""
+    from .io import detect_layout
+
+    try:
+        folder = detect_layout(path).folder
+    except (OSError, ValueError):  # reported properly when the light field is loaded
+        folder = os.path.abspath(path)
+    return os.path.basename(folder.rstrip(os.sep)) or "lightfield"
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt (like Ctrl-C), so that cleanup runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextlib.contextmanager
+def output_session(out: str, source: str | None, *, force: bool):
+    """Check, lock and stage the output folder before any work (`OutputWriter`); on any
+    error, Ctrl-C or SIGTERM inside the block the staging folder, the lock and the parent
+    folders it created are removed and the old output is left as it was.
+
+    Yields:
+        The `OutputWriter` (commit it to publish the output).
+    """
+    from .io import OutputWriter
+
+    with _terminate_as_interrupt():
+        try:
+            writer = OutputWriter(out, force=force, source=source)
+        except ValueError as e:
+            raise click.ClickException(str(e)) from None
+        except OSError as e:
+            raise click.ClickException(f"cannot write output folder {out}: {e}") from None
+        try:
+            yield writer
+        finally:
+            if not writer.committed:
+                writer.abort()
 
 
 _SUMMARY_KEYS = ("mse_x100", "badpix_0.07", "q25_x100", "view_consistency")
@@ -242,9 +325,12 @@ def _run_optimize(lf: LightField, result, config):
 
 
 def run_depth(
-    lf: LightField, out: str, *, force: bool, config_path: str | None, optimize: bool = False
+    lf: LightField, out, *, force: bool, config_path: str | None, optimize: bool = False
 ) -> dict:
     """Run the main job on a loaded light field and write every output into ``out``.
+
+    ``out`` is an output folder or an `OutputWriter` from `output_session` (which then
+    holds the folder's lock from before the light field was loaded).
 
     With ``optimize`` the Ch. 6 result is refined by the differentiable edge model
     (thesis Ch. 7, `optimize_disparity`); ``metrics.json`` then also holds the ``initial``
@@ -255,11 +341,14 @@ def run_depth(
     """
     from tqdm import tqdm
 
-    from .io import OutputWriter, check_output_dir
+    from .io import OutputWriter
     from .pipeline import STAGES, estimate_disparity, write_outputs
 
+    if not isinstance(out, OutputWriter):
+        with output_session(out, lf.source, force=force) as writer:
+            return run_depth(lf, writer, force=force, config_path=config_path, optimize=optimize)
     try:
-        check_output_dir(out, lf.source, force=force)
+        out.check_source(lf.source)
     except ValueError as e:
         raise click.ClickException(str(e)) from None
     config = _config_from_file(config_path)
@@ -286,7 +375,7 @@ def run_depth(
         initial = result
         result, info = _run_optimize(lf, result, config)
     total = time.perf_counter() - t0
-    writer = OutputWriter(out)
+    writer = out
     try:
         metrics = write_outputs(
             writer, lf, result, seconds_total=total, initial=initial, optimize_info=info
@@ -296,6 +385,7 @@ def run_depth(
         writer.abort()
         raise
     click.echo(f"wrote {writer.out}")
+    _echo_warnings(metrics.get("warnings", []))
     for k in _SUMMARY_KEYS + ("seconds_total", "compile_seconds"):
         if k in metrics:
             line = f"  {k:<18} {metrics[k]:.4f}"
@@ -347,10 +437,12 @@ def depth(path: str, views, scale, transpose, out, force, config_path, optimize)
     Writes per-view PFMs, disparity.npz, PNG colour maps, a mosaic of all views, EPIs with
     the detected lines, and metrics.json (with error maps when ground truth exists).
     """
-    lf, _, seconds = load_or_exit(path, views, scale, transpose)
-    click.echo(f"loaded {path} in {seconds:.2f} s")
-    out = out or os.path.join("mvedge_out", lf.name)
-    run_depth(lf, out, force=force, config_path=config_path, optimize=optimize)
+    _check_config_early(config_path, path, views, scale)
+    out = out or os.path.join("mvedge_out", _scene_name(path))
+    with output_session(out, path, force=force) as writer:
+        lf, _, seconds = load_or_exit(path, views, scale, transpose)
+        click.echo(f"loaded {path} in {seconds:.2f} s")
+        run_depth(lf, writer, force=force, config_path=config_path, optimize=optimize)
 
 
 @main.command()
@@ -374,8 +466,10 @@ def demo(out, force, config_path, optimize) -> None:
     """Run the main job on the embedded synthetic light field (ground truth for every view)."""
     from .synthetic import default_light_field
 
-    lf = default_light_field()
-    metrics = run_depth(lf, out, force=force, config_path=config_path, optimize=optimize)
+    _config_from_file(config_path)  # a bad config fails before anything is computed
+    with output_session(out, None, force=force) as writer:
+        lf = default_light_field()
+        metrics = run_depth(lf, writer, force=force, config_path=config_path, optimize=optimize)
     if "all_views" in metrics:
         a = metrics["all_views"]
         line = (

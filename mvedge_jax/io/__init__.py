@@ -18,6 +18,8 @@ from ._layout import LayoutInfo as LayoutInfo
 from ._layout import detect_layout as detect_layout
 from ._layout import read_hci_old_attributes as read_hci_old_attributes
 from ._layout import read_hci_parameters as read_hci_parameters
+from ._load import MIN_VIEW_SIZE as MIN_VIEW_SIZE
+from ._load import DisparityRangeWarning as DisparityRangeWarning
 from ._load import crop_window as crop_window
 from ._load import load_light_field as load_light_field
 from ._load import load_light_field_with_info as load_light_field_with_info

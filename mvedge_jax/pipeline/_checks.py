@@ -284,6 +284,32 @@ def check_memory(config, grid, size, disparity_range, *, views_bytes: int = 0) -
         )
 
 
+def check_memory_before_loading(config, path, *, views=None, scale=None) -> None:
+    """`check_memory` from a light-field folder's layout alone (no pixels read): the grid
+    (after the ``views`` crop), the metadata disparity range (times ``scale``) and the
+    smallest accepted view size, i.e. a lower bound of the real need.
+
+    Raises:
+        ConfigError: if even that lower bound exceeds the memory limit.
+    """
+    from ..io import MIN_VIEW_SIZE, crop_window, detect_layout
+
+    try:
+        info = detect_layout(path)
+        grid = crop_window(info.grid, None if views is None else tuple(views))[2:]
+    except (OSError, ValueError, TypeError):
+        return  # the loader reports this
+    drange = info.disparity_range
+    if drange is not None and scale is not None:
+        drange = (drange[0] * scale, drange[1] * scale)
+    try:
+        check_memory(config, grid, (MIN_VIEW_SIZE, MIN_VIEW_SIZE), drange)
+    except ConfigError:
+        raise
+    except ValueError:
+        return  # e.g. d_max below the scene's range: reported by the pipeline
+
+
 def check_compiled_memory(stage: str, compiled) -> None:
     """Refuse to run a compiled stage whose buffers exceed `memory_limit` (XLA's own
     figures: arguments, outputs and temporaries).
