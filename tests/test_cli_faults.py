@@ -340,8 +340,7 @@ def test_real_run_reports_solver_status_and_refuses_a_flat_scene(tmp_path):
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
     assert metrics["solver"]["surface"]["status"] == "converged"
     assert metrics["warnings"] == []
-    flat = tmp_path / "flat"
-    flat.mkdir()
+    flat = write_scene(tmp_path / "flat")
     for k in range(9):
         cv2.imwrite(str(flat / f"input_Cam{k:03d}.png"), np.full((32, 32, 3), 128, np.uint8))
     res = depth(flat, "--out", tmp_path / "flat_out")

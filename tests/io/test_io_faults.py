@@ -140,6 +140,30 @@ def test_abort_removes_staging_lock_and_created_parents(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_destination_is_complete_even_if_renames_fail_during_commit(tmp_path, monkeypatch):
+    """A crash between the steps of the commit (simulated by failing renames) must leave the
+    complete old output or the complete new one, never a missing or mangled folder."""
+    out = tmp_path / "res"
+    with OutputWriter(out) as w:
+        w.json("metrics.json", {"run": 1})
+        w.commit()
+    w = OutputWriter(out, force=True)
+    w.json("metrics.json", {"run": 2})
+
+    def crash(*args):
+        raise OSError("killed")
+
+    monkeypatch.setattr(os, "replace", crash)
+    monkeypatch.setattr(os, "rename", crash)
+    try:
+        w.commit()
+    except OSError:
+        pass
+    monkeypatch.undo()
+    assert json.loads((out / "metrics.json").read_text())["run"] in (1, 2)
+    assert (out / OUTPUT_MARKER).is_file()
+
+
 def test_failure_inside_with_block_leaves_old_output(tmp_path):
     out = tmp_path / "res"
     with OutputWriter(out) as w:
