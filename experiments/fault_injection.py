@@ -228,12 +228,22 @@ def main(argv=None) -> int:
         print(f"[{outcome[0]:>9}] {name}: {outcome[1]}", flush=True)
 
     def run_error(
-        name, scene, out, *extra, match="", force=True, expect="error", check=None, protect=()
+        name,
+        scene,
+        out,
+        *extra,
+        match="",
+        force=True,
+        expect="error",
+        check=None,
+        protect=(),
+        holder=None,
     ):
         """Run ``depth`` on ``scene`` into ``out``. The case's ``data`` folder (the input and
         its parent) and ``protect`` (a user's folders) must survive unchanged; after a
         failure ``out`` must be as before, and no debris or created parent may remain."""
-        data_dir = next(p for p in [scene, *scene.parents] if p.name == "data")
+        real = Path(os.path.realpath(scene))
+        data_dir = next(p for p in [real, *real.parents] if p.name == "data")
         inputs = {p: snapshot(p) for p in (data_dir, *protect)}
         out_before = snapshot(out) if out.exists() else None
         created, p = None, out.parent
@@ -241,6 +251,8 @@ def main(argv=None) -> int:
             created, p = p, p.parent
         args_ = ["depth", scene, "--out", out, *(["--force"] if force else []), *extra]
         rc, output, to = cli(*args_, timeout=900 if expect != "error" else 300)
+        if holder is not None:  # the other run finishes (its lock and staging go)
+            holder.abort()
         outcome = classify_cli(
             rc,
             output,
@@ -358,10 +370,14 @@ def main(argv=None) -> int:
     )
 
     # -- concurrency: a second run on a locked output fails fast
-    holder = OutputWriter(out_ok, force=True)
+    holder = OutputWriter(out_ok, force=True)  # another run, holding the output
     try:
         run_error(
-            "concurrent run on the same output", s_ok, out_ok, match="another mvedge run is writing"
+            "concurrent run on the same output",
+            s_ok,
+            out_ok,
+            match="another mvedge run is writing",
+            holder=holder,
         )
     finally:
         holder.abort()

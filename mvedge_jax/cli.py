@@ -226,8 +226,8 @@ def _config_from_file(path: str | None):
         raise click.ClickException(f"cannot read config file {path}: {e}") from None
     try:
         return config_from_dict(data, source=path)
-    except (TypeError, ValueError) as e:
-        raise click.ClickException(f"bad config file {path}: {e}") from None
+    except (TypeError, ValueError) as e:  # the message starts with the file's path
+        raise click.ClickException(f"bad config file {e}") from None
 
 
 def _check_config_early(config_path: str | None, path: str, views, scale) -> None:

@@ -24,6 +24,11 @@ from ._pfm import read_pfm
 MIN_VIEW_SIZE = 16
 
 
+#: Ground truth may exceed the metadata disparity range by this much (px/view) unwarned: the
+#: filter bank extends the range by ``EdgeConfig.d_margin`` (0.25) anyway.
+_RANGE_SLACK = 0.25
+
+
 class DisparityRangeWarning(UserWarning):
     """The disparity range in a scene's metadata looks wrong (the message says which range
     is used instead)."""
@@ -293,8 +298,9 @@ def _checked_range(
     Implausible: a point at the range's largest ``|d|`` would move by more than the whole
     view between the outermost views of the grid (``|d| (max(U, V) - 1) > max(H, W)``);
     such a range is ignored (the pipeline then uses its configured fallback). A range that
-    the ground truth (where present) exceeds by more than half a pixel per view is kept but
-    warned about. Each warning is issued as a `DisparityRangeWarning` and returned.
+    the ground truth (where present) exceeds by more than `_RANGE_SLACK` (0.25 px/view, the
+    default ``EdgeConfig.d_margin``) is kept but warned about. Each warning is issued as a
+    `DisparityRangeWarning` and returned.
     """
     drange = info.disparity_range
     if drange is None:
@@ -313,7 +319,7 @@ def _checked_range(
     elif gt is not None and gt_mask is not None and gt_mask.any():
         vals = gt[gt_mask] / gt_scale
         g_lo, g_hi = float(vals.min()), float(vals.max())
-        if g_lo < lo - 0.5 or g_hi > hi + 0.5:
+        if g_lo < lo - _RANGE_SLACK or g_hi > hi + _RANGE_SLACK:
             notes.append(
                 f"the metadata disparity range [{lo:g}, {hi:g}] px/view of {info.folder} is "
                 f"narrower than its ground truth [{g_lo:.3g}, {g_hi:.3g}]; the range used is "

@@ -153,9 +153,7 @@ def _check_dtypes(lf: LightField) -> None:
     dt = np.dtype(lf.views.dtype)
     if not np.issubdtype(dt, np.floating):
         hint = " (divide 8-bit images by 255)" if dt == np.uint8 else ""
-        raise ValueError(
-            f"LightField.views must be float32 RGB in [0, 1]; got dtype {dt}{hint}"
-        )
+        raise ValueError(f"LightField.views must be float32 RGB in [0, 1]; got dtype {dt}{hint}")
     if lf.gt_disparity is not None and not np.issubdtype(
         np.dtype(lf.gt_disparity.dtype), np.floating
     ):
