@@ -7,12 +7,16 @@ error messages.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import glob
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 import click
@@ -92,10 +96,20 @@ def load_or_exit(
 
     t0 = time.perf_counter()
     try:
-        lf, info = load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)
-    except (FileNotFoundError, NotADirectoryError, ValueError) as e:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            lf, info = load_light_field_with_info(
+                path, views=views, scale=scale, transpose=transpose
+            )
+    except (FileNotFoundError, NotADirectoryError, PermissionError, ValueError) as e:
         raise click.ClickException(str(e)) from None
+    _echo_warnings(str(w.message) for w in caught)
     return lf, info, time.perf_counter() - t0
+
+
+def _echo_warnings(messages) -> None:
+    for m in messages:
+        click.secho(f"warning: {m}", fg="yellow", err=True)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -230,12 +244,81 @@ def _config_from_file(path: str | None):
             data = tomllib.load(f)
     except FileNotFoundError:
         raise click.ClickException(f"config file not found: {path}") from None
-    except tomllib.TOMLDecodeError as e:
+    except IsADirectoryError:
+        raise click.ClickException(f"config file {path} is a folder, not a TOML file") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise click.ClickException(f"config file {path} is not valid TOML: {e}") from None
+    except OSError as e:
+        raise click.ClickException(f"cannot read config file {path}: {e}") from None
     try:
-        return config_from_dict(data)
-    except (TypeError, ValueError) as e:
-        raise click.ClickException(f"bad config file {path}: {e}") from None
+        return config_from_dict(data, source=path)
+    except (TypeError, ValueError) as e:  # the message starts with the file's path
+        raise click.ClickException(f"bad config file {e}") from None
+
+
+def _check_config_early(config_path: str | None, path: str, views, scale) -> None:
+    """Parse the config and bound its memory need from the folder's layout, before any
+    pixel is read."""
+    from .pipeline._checks import check_memory_before_loading
+
+    config = _config_from_file(config_path)
+    try:
+        check_memory_before_loading(config, path, views=views, scale=scale)
+    except ValueError as e:
+        raise click.ClickException(str(e)) from None
+
+
+def _scene_name(path: str) -> str:
+    """The light field's name (its folder's name) without reading pixels."""
+    from .io import detect_layout
+
+    try:
+        folder = detect_layout(path).folder
+    except (OSError, ValueError):  # reported properly when the light field is loaded
+        folder = os.path.abspath(path)
+    return os.path.basename(folder.rstrip(os.sep)) or "lightfield"
+
+
+@contextlib.contextmanager
+def _terminate_as_interrupt() -> Iterator[None]:
+    """SIGTERM raises KeyboardInterrupt (like Ctrl-C), so that cleanup runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+@contextlib.contextmanager
+def output_session(out: str, source: str | None, *, force: bool):
+    """Check, lock and stage the output folder before any work (`OutputWriter`); on any
+    error, Ctrl-C or SIGTERM inside the block the staging folder, the lock and the parent
+    folders it created are removed and the old output is left as it was.
+
+    Yields:
+        The `OutputWriter` (commit it to publish the output).
+    """
+    from .io import OutputWriter
+
+    with _terminate_as_interrupt():
+        try:
+            writer = OutputWriter(out, force=force, source=source)
+        except ValueError as e:
+            raise click.ClickException(str(e)) from None
+        except OSError as e:
+            raise click.ClickException(f"cannot write output folder {out}: {e}") from None
+        try:
+            yield writer
+        finally:
+            if not writer.committed:
+                writer.abort()
 
 
 _SUMMARY_KEYS = ("mse_x100", "badpix_0.07", "q25_x100", "view_consistency")
@@ -298,6 +381,9 @@ def run_depth(
     checked: bool = False,
 ) -> dict:
     """Run the main job on a loaded light field and write every output into ``out``.
+
+    ``out`` is an output folder or an `OutputWriter` from `output_session` (which then
+    holds the folder's lock from before the light field was loaded).
 
     With ``optimize`` the Ch. 6 result is refined by the differentiable edge model
     (thesis Ch. 7, `optimize_disparity`); ``metrics.json`` then also holds the ``initial``
@@ -379,7 +465,7 @@ def run_depth(
             window=None if load_info is None else load_info.window,
         )
         prov["seconds_load"] = load_seconds
-        writer = OutputWriter(out)
+        writer = OutputWriter(out, force=force, source=lf.source)
         try:
             metrics = write_outputs(
                 writer,
@@ -404,6 +490,7 @@ def run_depth(
     finally:
         bar.close()
     click.echo(f"wrote {writer.out}")
+    _echo_warnings(metrics.get("warnings", []))
     for k in _SUMMARY_KEYS + ("seconds_total", "compile_seconds"):
         if metrics.get(k) is not None:
             line = f"  {k:<18} {metrics[k]:.4f}"

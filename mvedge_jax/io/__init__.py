@@ -23,6 +23,8 @@ from ._layout import LayoutInfo as LayoutInfo
 from ._layout import detect_layout as detect_layout
 from ._layout import read_hci_old_attributes as read_hci_old_attributes
 from ._layout import read_hci_parameters as read_hci_parameters
+from ._load import MIN_VIEW_SIZE as MIN_VIEW_SIZE
+from ._load import DisparityRangeWarning as DisparityRangeWarning
 from ._load import crop_window as crop_window
 from ._load import load_light_field as load_light_field
 from ._load import load_light_field_with_info as load_light_field_with_info
@@ -31,5 +33,8 @@ from ._orient import ParallaxCheck as ParallaxCheck
 from ._orient import check_parallax_axes as check_parallax_axes
 from ._pfm import read_pfm as read_pfm
 from ._pfm import write_pfm as write_pfm
+from ._results import OUTPUT_MARKER as OUTPUT_MARKER
+from ._results import OutputError as OutputError
 from ._results import OutputWriter as OutputWriter
 from ._results import check_output_dir as check_output_dir
+from ._results import is_output_folder as is_output_folder

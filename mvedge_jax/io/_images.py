@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 
@@ -26,12 +27,40 @@ def aligned_zeros(shape: tuple[int, ...], dtype=np.float32, align: int = 64) -> 
     return buf[off : off + n].view(dtype).reshape(shape)
 
 
-def _decode(path: str) -> np.ndarray:
-    """Decode an image file to uint8/uint16 ``(H, W, 3)`` RGB (alpha dropped, grey repeated)."""
+def check_regular_file(path: str, what: str = "image file") -> None:
+    """Raise unless ``path`` is a regular file (after following symlinks).
+
+    Reading a named pipe, a device or a socket could block forever or read endless data,
+    so only regular files are opened.
+
+    Raises:
+        FileNotFoundError: if ``path`` does not exist.
+        ValueError: if it is a folder, a named pipe, a device or a socket.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} not found: {path}") from None
+    if not stat.S_ISREG(mode):
+        kind = (
+            "a folder"
+            if stat.S_ISDIR(mode)
+            else "a named pipe"
+            if stat.S_ISFIFO(mode)
+            else "a device"
+            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a socket"
+            if stat.S_ISSOCK(mode)
+            else "not a regular file"
+        )
+        raise ValueError(f"{what} {path} is {kind}, not a regular file; refusing to read it")
+
+
+def _decode_channels(path: str) -> tuple[np.ndarray, int]:
+    """`_decode`, also returning the file's channel count (1 grey, 2 grey+alpha, 3, 4)."""
+    check_regular_file(path)
     img = cv2.imread(path, cv2.IMREAD_UNCHANGED)
     if img is None:
-        if not os.path.isfile(path):
-            raise FileNotFoundError(f"image file not found: {path}")
         raise ValueError(
             f"cannot decode image {path} ({os.path.getsize(path)} bytes): corrupt, truncated "
             "or not an image"
@@ -39,12 +68,22 @@ def _decode(path: str) -> np.ndarray:
     if img.dtype not in (np.uint8, np.uint16):
         raise ValueError(f"unsupported image dtype {img.dtype} in {path}; expected 8 or 16 bit")
     if img.ndim == 2:
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB)
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2RGB), 1
     if img.shape[2] == 4:
-        return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB)
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2RGB), 4
     if img.shape[2] == 3:
-        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB), 3
     raise ValueError(f"unsupported channel count {img.shape[2]} in {path}; expected 1, 3 or 4")
+
+
+def _decode(path: str) -> np.ndarray:
+    """Decode an image file to uint8/uint16 ``(H, W, 3)`` RGB (alpha dropped, grey repeated).
+
+    Raises:
+        FileNotFoundError: if the file does not exist.
+        ValueError: not a regular file, not decodable, or an unsupported format.
+    """
+    return _decode_channels(path)[0]
 
 
 def scaled_size(size: tuple[int, int], scale: float) -> tuple[int, int]:
@@ -109,25 +148,33 @@ def _read_views(
     workers: int | None = None,
     slots: Sequence[int] | None = None,
     n_slots: int | None = None,
+    min_size: int = 1,
 ) -> tuple[np.ndarray, tuple[int, int]]:
     """`read_views`, also returning the original ``(H, W)`` (that of ``paths[0]``).
 
     With ``slots``/``n_slots`` the result is ``(n_slots, H, W, 3)`` with image ``i`` at
     ``slots[i]`` and zeros elsewhere (read straight into place, no second copy).
+
+    Raises:
+        ValueError: also if the views (after scaling) are smaller than ``min_size`` pixels
+            in a direction (checked on the first view, before anything is allocated), or
+            grey views are mixed with colour views.
     """
     if not paths:
         raise ValueError("read_views: no image paths given")
     workers = workers or min(8, os.cpu_count() or 1)
     slots = list(range(len(paths))) if slots is None else list(slots)
     n_slots = len(paths) if n_slots is None else n_slots
-    first = _decode(paths[0])
+    first, first_channels = _decode_channels(paths[0])
     size = first.shape[:2]
     out_size = scaled_size(size, scale) if scale is not None else size
+    _check_min_size(paths[0], size, out_size, scale, min_size)
     out = aligned_zeros((n_slots, *out_size, 3), np.float32)
     shapes: dict[int, tuple[int, ...]] = {}
+    channels: dict[int, int] = {}
 
     def one(i: int) -> None:
-        img = first if i == 0 else _decode(paths[i])
+        img, channels[i] = (first, first_channels) if i == 0 else _decode_channels(paths[i])
         shapes[i] = img.shape[:2]
         if img.shape[:2] != size:
             return  # reported below with every mismatching file
@@ -156,7 +203,50 @@ def _read_views(
             f"views have different sizes in {os.path.dirname(paths[0])}: "
             f"{os.path.basename(paths[0])} is {h0}x{w0} (HxW) but {odd}{more}"
         )
+    _check_channels(paths, channels)
     return out, (int(size[0]), int(size[1]))
+
+
+_CHANNEL_NAMES = {1: "grey", 2: "grey + alpha", 3: "RGB", 4: "RGBA"}
+
+
+def _check_channels(paths: Sequence[str], channels: dict[int, int]) -> None:
+    """Grey views among colour views (or the reverse) are an error, naming the files."""
+    grey = [i for i in range(len(paths)) if channels[i] < 3]
+    colour = [i for i in range(len(paths)) if channels[i] >= 3]
+    if grey and colour:
+        few, many = (grey, colour) if len(grey) <= len(colour) else (colour, grey)
+        odd = ", ".join(
+            f"{os.path.basename(paths[i])} ({_CHANNEL_NAMES[channels[i]]})" for i in few[:4]
+        )
+        more = f" and {len(few) - 4} more" if len(few) > 4 else ""
+        raise ValueError(
+            f"views mix grey and colour images in {os.path.dirname(paths[0])}: {odd}{more}, "
+            f"but {os.path.basename(paths[many[0]])} is {_CHANNEL_NAMES[channels[many[0]]]}; "
+            "every view must have the same colour format"
+        )
+
+
+def _check_min_size(
+    path: str,
+    size: tuple[int, int],
+    out_size: tuple[int, int],
+    scale: float | None,
+    min_size: int,
+) -> None:
+    if min(out_size) >= min_size:
+        return
+    h, w = size
+    if tuple(out_size) != tuple(size):
+        raise ValueError(
+            f"scale {scale:g} makes the {h}x{w} (HxW) views of {os.path.dirname(path)} "
+            f"{out_size[0]}x{out_size[1]} px, below the minimum of {min_size}x{min_size} px; "
+            "use a larger scale"
+        )
+    raise ValueError(
+        f"views in {os.path.dirname(path)} are {h}x{w} px (HxW, {os.path.basename(path)}), "
+        f"below the minimum of {min_size}x{min_size} px for depth estimation"
+    )
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray) -> None:

@@ -152,7 +152,16 @@ def _float_opt(params: dict, section: str, key: str, path: str) -> float | None:
 
 
 def _scan_hci4d(folder: str, names: list[str]) -> LayoutInfo:
-    cams = {int(m.group(1)): n for n in names if (m := _HCI_VIEW.match(n))}
+    cams: dict[int, str] = {}
+    for n in names:
+        if m := _HCI_VIEW.match(n):
+            k = int(m.group(1))
+            if k in cams:
+                raise ValueError(
+                    f"ambiguous HCI 4D folder {folder}: {cams[k]} and {n} both name camera "
+                    f"{k:03d}; remove one of them"
+                )
+            cams[k] = n
     cfg_path = os.path.join(folder, "parameters.cfg")
     nx = ny = None
     drange = None

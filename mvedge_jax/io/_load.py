@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 
 import cv2
 import jax
@@ -15,6 +16,22 @@ from ._images import _read_views, aligned_zeros, resize_area
 from ._layout import VIEW_GRID, LayoutInfo, Position, detect_layout
 from ._orient import check_parallax_axes, transpose_layout
 from ._pfm import read_pfm
+
+#: Smallest view size, in pixels in each direction after ``scale``, that the loader accepts.
+#: Edge detection blurs with a 7-pixel kernel and the reconstruction diffuses over
+#: neighbourhoods of about that size; views smaller than 16x16 px leave too few pixels
+#: for a meaningful disparity map (3x3-px views gave an all-zero map).
+MIN_VIEW_SIZE = 16
+
+
+#: Ground truth may exceed the metadata disparity range by this much (px/view) unwarned: the
+#: filter bank extends the range by ``EdgeConfig.d_margin`` (0.25) anyway.
+_RANGE_SLACK = 0.25
+
+
+class DisparityRangeWarning(UserWarning):
+    """The disparity range in a scene's metadata looks wrong (the message says which range
+    is used instead)."""
 
 
 def _normalise_views(views) -> tuple[int, int] | None:
@@ -165,9 +182,17 @@ def orient(info: LayoutInfo, transpose: bool | None = None) -> LayoutInfo:
 
     Returns:
         The layout, transposed when needed, with a note saying how it was decided.
+
+    Raises:
+        ValueError: if ``transpose`` is True for an HCI layout (its naming fixes the order).
     """
     if transpose is None and info.layout != VIEW_GRID:
         return info
+    if transpose and info.layout != VIEW_GRID:
+        raise ValueError(
+            f"transpose applies to view grids only: {info.folder} is {info.layout} "
+            f"({info.pattern}), whose file naming fixes the row/column order"
+        )
     if transpose is None:
         U, V = info.grid
         if U < 3 or V < 3 or info.centre not in info.files:
@@ -222,6 +247,7 @@ def assemble(
         scale=s,
         slots=[(r - r0) * v + (c - c0) for r, c in positions],
         n_slots=u * v,
+        min_size=MIN_VIEW_SIZE,
     )
     H, W = flat.shape[1:3]
     arr = flat.reshape(u, v, H, W, 3)
@@ -238,7 +264,7 @@ def assemble(
             if s is not None:
                 d, ok = _scale_gt(d, ok, (H, W), s)
             gt[r - r0, c - c0], gt_mask[r - r0, c - c0] = d, ok
-    drange = info.disparity_range
+    drange, range_notes = _checked_range(info, size, (u, v), gt, gt_mask, s or 1.0)
     if drange is not None and s is not None:
         drange = (drange[0] * s, drange[1] * s)
     # device_put wraps the aligned host buffers without a copy on CPU (they are not touched
@@ -254,7 +280,54 @@ def assemble(
     )
     if crop is not None and (u, v) != (U, V):
         info = info.with_(window=window)
+    if range_notes:
+        info = info.with_(notes=(*info.notes, *range_notes))
     return lf, info.with_(scale=s, image_size=size)
+
+
+def _checked_range(
+    info: LayoutInfo,
+    size: tuple[int, int],
+    grid: tuple[int, int],
+    gt: np.ndarray | None,
+    gt_mask: np.ndarray | None,
+    gt_scale: float,
+) -> tuple[tuple[float, float] | None, list[str]]:
+    """The metadata disparity range (full resolution) if plausible, and warnings.
+
+    Implausible: a point at the range's largest ``|d|`` would move by more than the whole
+    view between the outermost views of the grid (``|d| (max(U, V) - 1) > max(H, W)``);
+    such a range is ignored (the pipeline then uses its configured fallback). A range that
+    the ground truth (where present) exceeds by more than `_RANGE_SLACK` (0.25 px/view, the
+    default ``EdgeConfig.d_margin``) is kept but warned about. Each warning is issued as a
+    `DisparityRangeWarning` and returned.
+    """
+    drange = info.disparity_range
+    if drange is None:
+        return None, []
+    lo, hi = drange
+    notes = []
+    bound = max(size) / max(max(grid) - 1, 1)
+    if max(abs(lo), abs(hi)) > bound:
+        notes.append(
+            f"the metadata disparity range [{lo:g}, {hi:g}] px/view of {info.folder} is "
+            f"implausible for {grid[0]}x{grid[1]} views of {size[0]}x{size[1]} px (beyond "
+            f"±{bound:.3g}: points would leave the views); ignored, the disparity range used "
+            "is unknown (the pipeline's EdgeConfig.d_max or d_max_fallback applies)"
+        )
+        drange = None
+    elif gt is not None and gt_mask is not None and gt_mask.any():
+        vals = gt[gt_mask] / gt_scale
+        g_lo, g_hi = float(vals.min()), float(vals.max())
+        if g_lo < lo - _RANGE_SLACK or g_hi > hi + _RANGE_SLACK:
+            notes.append(
+                f"the metadata disparity range [{lo:g}, {hi:g}] px/view of {info.folder} is "
+                f"narrower than its ground truth [{g_lo:.3g}, {g_hi:.3g}]; the range used is "
+                f"still [{lo:g}, {hi:g}] (set EdgeConfig.d_max to cover the scene)"
+            )
+    for note in notes:
+        warnings.warn(note, DisparityRangeWarning, stacklevel=3)
+    return drange, notes
 
 
 def load_light_field_with_info(
@@ -293,8 +366,15 @@ def load_light_field(
         scale: optional spatial downscale factor in (0, 1]: views are resized with
             ``cv2.INTER_AREA`` to ``round(H * scale) × round(W * scale)``; ground-truth
             disparity (pixels) and ``disparity_range`` are multiplied by ``scale``; a GT
-            pixel stays valid only when every source pixel under it was valid.
-        transpose: view grids only: None = decide from the parallax, True/False = force.
+            pixel stays valid only when every source pixel under it was valid. The result
+            must be at least `MIN_VIEW_SIZE` (16) pixels in each direction.
+        transpose: view grids only: None = decide from the parallax, True/False = force
+            (True on an HCI layout is an error).
+
+    Only regular files are read (a named pipe among the views is an error, not a hang).
+    A metadata disparity range that cannot be right (points would leave the views) is
+    ignored, and one narrower than the ground truth is kept; both issue a
+    `DisparityRangeWarning` and a note in the `LayoutInfo`.
 
     Returns:
         A `LightField`: ``views (U, V, H, W, 3)`` float32 RGB in [0, 1], ``view_mask (U, V)``,
@@ -304,9 +384,12 @@ def load_light_field(
     Raises:
         FileNotFoundError: the folder, the centre view or a named file is missing.
         NotADirectoryError: ``path`` is a file.
-        ValueError: no recognised layout; views of different sizes; a gap in the central
-            cross-hair; fewer than 3 views in a direction; a crop larger than the grid; a bad
-            ``scale``; corrupt/truncated images, PFM or ``depth.bin``; NaN/Inf ground truth;
-            metadata that contradicts the files.
+        ValueError: no recognised layout; two files for one view (``input_Cam40.png`` and
+            ``input_Cam040.png``); views of different sizes; grey views among colour views;
+            views (after ``scale``) smaller than `MIN_VIEW_SIZE`; a view that is not a
+            regular file; a gap in the central cross-hair; fewer than 3 views in a
+            direction; a crop larger than the grid; a bad ``scale``; ``transpose=True`` on an
+            HCI layout; corrupt/truncated images, PFM or ``depth.bin``; NaN/Inf ground
+            truth; metadata that contradicts the files.
     """
     return load_light_field_with_info(path, views=views, scale=scale, transpose=transpose)[0]

@@ -6,6 +6,8 @@ import os
 
 import numpy as np
 
+from ._images import check_regular_file
+
 
 def read_pfm(path: str | os.PathLike) -> np.ndarray:
     """Read a PFM file.
@@ -20,11 +22,11 @@ def read_pfm(path: str | os.PathLike) -> np.ndarray:
 
     Raises:
         FileNotFoundError: if the file does not exist.
-        ValueError: if the header is malformed or the data is truncated.
+        ValueError: if the header is malformed, the data is truncated, or the path is not a
+            regular file (a named pipe is never opened).
     """
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"PFM file not found: {path}")
+    check_regular_file(path, "PFM file")
     with open(path, "rb") as f:
         data = f.read()
     # Header: three whitespace-separated tokens, each ended by a single whitespace byte.

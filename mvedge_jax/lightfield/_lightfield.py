@@ -29,7 +29,11 @@ class LightField(eqx.Module):
 
     Raises:
         ValueError: on construction, if shapes disagree, the grid is smaller than 3 in a
-            direction, the cross-hair is incomplete, or values are non-finite.
+            direction, the cross-hair is incomplete, ``views`` is not floating point (uint8
+            images must be divided by 255), ``views`` holds values outside [0, 1] (more
+            than `VALUE_TOLERANCE` beyond; e.g. 0–255 floats) or NaN/Inf, ``gt_mask`` is not
+            boolean, or ``gt_disparity`` is NaN/Inf where ``gt_mask`` is True. Value checks
+            run on concrete arrays only (not while tracing under ``jit``/``vmap``).
     """
 
     views: Float[Array, "U V H W 3"]
@@ -65,11 +69,13 @@ class LightField(eqx.Module):
                 f"LightField.gt_mask must have shape {(U, V, H, W)}; "
                 f"got {tuple(self.gt_mask.shape)}"
             )
+        _check_dtypes(self)
         # Concrete checks only (skipped while tracing, e.g. under jit/vmap).
         try:
             mask = np.asarray(self.view_mask)
         except Exception:  # a tracer: nothing concrete to check
             return
+        _check_values(self)
         rc, cc = U // 2, V // 2
         if not mask[rc, :].all() or not mask[:, cc].all():
             missing = [(rc, c) for c in range(V) if not mask[rc, c]] + [
@@ -136,6 +142,60 @@ class LightField(eqx.Module):
     def vertical_epis(self, channels: Float[Array, "U V H W C"] | None = None):
         """Vertical EPIs of the centre view column (SPEC §0). See `vertical_epis`."""
         return vertical_epis(self.views if channels is None else channels)
+
+
+#: Views may exceed [0, 1] by this much (rounding of resampling filters); beyond it the
+#: light field is refused (0–255 values, unnormalised HDR data).
+VALUE_TOLERANCE = 1e-3
+
+
+def _check_dtypes(lf: LightField) -> None:
+    dt = np.dtype(lf.views.dtype)
+    if not np.issubdtype(dt, np.floating):
+        hint = " (divide 8-bit images by 255)" if dt == np.uint8 else ""
+        raise ValueError(f"LightField.views must be float32 RGB in [0, 1]; got dtype {dt}{hint}")
+    if lf.gt_disparity is not None and not np.issubdtype(
+        np.dtype(lf.gt_disparity.dtype), np.floating
+    ):
+        raise ValueError(
+            f"LightField.gt_disparity must be floating point; got dtype {lf.gt_disparity.dtype}"
+        )
+    if lf.gt_mask is not None and np.dtype(lf.gt_mask.dtype) != np.bool_:
+        raise ValueError(f"LightField.gt_mask must be boolean; got dtype {lf.gt_mask.dtype}")
+    if lf.view_mask.dtype != np.bool_:
+        raise ValueError(f"LightField.view_mask must be boolean; got dtype {lf.view_mask.dtype}")
+
+
+def _check_values(lf: LightField) -> None:
+    """Range and finiteness of concrete views and ground truth."""
+    try:
+        views = np.asarray(lf.views)
+    except Exception:  # a tracer
+        return
+    lo, hi = float(views.min()), float(views.max())
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        n = int((~np.isfinite(views)).sum())
+        raise ValueError(f"LightField.views of {lf.name!r} contains {n} NaN/Inf values")
+    if lo < -VALUE_TOLERANCE or hi > 1.0 + VALUE_TOLERANCE:
+        hint = " (looks like 0-255 values: divide by 255)" if hi > 2.0 else ""
+        raise ValueError(
+            f"LightField.views of {lf.name!r} must be in [0, 1]; got values in "
+            f"[{lo:.4g}, {hi:.4g}]{hint}"
+        )
+    if lf.gt_disparity is None:
+        return
+    try:
+        gt, gtm = np.asarray(lf.gt_disparity), np.asarray(lf.gt_mask)
+    except Exception:
+        return
+    bad = gtm & ~np.isfinite(gt)
+    if bad.any():
+        u, v, y, x = (int(i[0]) for i in np.nonzero(bad))
+        raise ValueError(
+            f"LightField.gt_disparity of {lf.name!r} has {int(bad.sum())} NaN/Inf values "
+            f"where gt_mask is True (first at view ({u}, {v}), y={y}, x={x}); set gt_mask "
+            "False there"
+        )
 
 
 def view_offsets(U: int, V: int) -> tuple[Float[Array, "U V"], Float[Array, "U V"]]:

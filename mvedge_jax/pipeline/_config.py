@@ -14,6 +14,7 @@ from ..diff import ModelConfig, OptimizeConfig, RenderConfig
 from ..edges import EdgeConfig
 from ..reconstruct import ReconstructConfig
 from ..surface import SurfaceConfig
+from ._checks import ConfigError, ConfigTypeError, override_config
 
 #: The default of ``PipelineConfig.optimize``: the thesis schedule and losses (Sec. 7.1.5) with
 #: settings that suit a start from the Ch. 6 result (dense, accurate labels): a narrower
@@ -160,48 +161,43 @@ def smooth_config(config: PipelineConfig | None = None) -> PipelineConfig:
     )
 
 
-def _tuples(value):
-    """TOML arrays → tuples (static config fields must be hashable)."""
-    if isinstance(value, list | tuple):
-        return tuple(_tuples(v) for v in value)
-    return value
-
-
-def _override(base: eqx.Module, table: dict) -> eqx.Module:
-    """``base`` with the fields named in ``table`` replaced; a sub-table overrides the fields
-    of a nested config (e.g. ``[optimize.model.render]``) and keeps its other values."""
-    kwargs = {}
-    for name, value in table.items():
-        current = getattr(base, name, None)
-        if isinstance(value, dict) and isinstance(current, eqx.Module):
-            kwargs[name] = _override(current, value)
-        else:
-            kwargs[name] = _tuples(value)
-    return dataclasses.replace(base, **kwargs)
-
-
 CONFIG_TABLES = ("edges", "surface", "reconstruct", "optimize")
 
 
-def config_from_dict(data: dict) -> PipelineConfig:
+def config_from_dict(data: dict, *, source: str | None = None) -> PipelineConfig:
     """Build a `PipelineConfig` from ``{"edges": {...}, "surface": {...}, "reconstruct": {...},
     "optimize": {...}}`` (keyword arguments of the stage configs; missing tables and keys keep
     the defaults).
 
     Nested configs are sub-tables, e.g. in TOML ``[optimize.loss]`` (``LossConfig``),
     ``[optimize.model]``, ``[optimize.model.render]`` or ``[reconstruct.epi_solver]``; arrays
-    become tuples (``blocks``, ``learning_rate``, ``tile_levels``).
+    become tuples (``blocks``, ``learning_rate``, ``tile_levels``). Every value is checked
+    against the type of the field's default (`override_config`): ``"false"`` is not a
+    boolean, an array is not a number.
+
+    Args:
+        data: the tables.
+        source: the file they came from, named in every error message.
 
     Raises:
-        ValueError: on an unknown table name or a bad parameter value.
-        TypeError: on an unknown parameter of a stage config.
+        ValueError: on an unknown table name or a bad parameter value (`ConfigError`).
+        TypeError: on an unknown parameter or a value of the wrong type (`ConfigTypeError`,
+            also a `ValueError`).
     """
+    where = f"{source}: " if source else ""
+    if not isinstance(data, dict):
+        raise ConfigTypeError(f"{where}the configuration must be a table of tables")
     unknown = set(data) - set(CONFIG_TABLES)
     if unknown:
-        raise ValueError(f"unknown config tables {sorted(unknown)}; use {', '.join(CONFIG_TABLES)}")
+        raise ConfigError(
+            f"{where}unknown config tables {sorted(unknown)}; use {', '.join(CONFIG_TABLES)}"
+        )
     base = PipelineConfig()
     return PipelineConfig(
-        **{name: _override(getattr(base, name), data.get(name, {})) for name in CONFIG_TABLES}
+        **{
+            name: override_config(getattr(base, name), data.get(name, {}), name, source)
+            for name in CONFIG_TABLES
+        }
     )
 
 

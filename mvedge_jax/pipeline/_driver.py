@@ -17,6 +17,7 @@ from ..lightfield import LightField
 from ..reconstruct import Reconstruction, propagate, select_centre, sharpen
 from ..surface import SurfaceResult
 from ._chain import edges_stage, reconstruct_stage, surface_stage
+from ._checks import check_compiled_memory, check_memory, diagnose
 from ._compile import STAGE_CACHE
 from ._config import PipelineConfig
 
@@ -32,6 +33,8 @@ class Result(eqx.Module):
         seconds_per_stage: wall seconds per stage after compilation (``edges``, ``surface``,
             ``reconstruct``; ``optimize`` after `optimize_disparity`).
         compile_seconds: total ahead-of-time compilation seconds.
+        diagnostics: ``warnings`` (list of str: almost no edge points, unconverged solves)
+            and ``solver`` (status per stage) from `diagnose`.
     """
 
     disparity: Float[Array, "U V H W"]
@@ -40,6 +43,7 @@ class Result(eqx.Module):
     reconstruction: Reconstruction
     seconds_per_stage: dict[str, float] = eqx.field(static=True)
     compile_seconds: float = eqx.field(static=True)
+    diagnostics: dict = eqx.field(static=True, default_factory=dict)
 
 
 def _edges(views, config, key, *, d_max):
@@ -74,8 +78,11 @@ def estimate_disparity(
         A `Result` with ``disparity`` of shape ``(U, V, H, W)``.
 
     Raises:
-        ValueError: if the views contain NaN/Inf, or the scene's disparity range does not
-            suit the filter bank (`check_cross_hair`).
+        ValueError: if the views contain NaN/Inf, no edge point is found, the result holds
+            NaN/Inf, or the scene's disparity range does not suit the filter bank
+            (`check_cross_hair`).
+        ConfigError: (a `ValueError`) if a stage would not fit in memory (checked before
+            anything is allocated, and again on each compiled stage).
 
     Warns:
         UserWarning: when edge candidates were dropped for lack of capacity (`warn_dropped`).
@@ -87,6 +94,7 @@ def estimate_disparity(
     key = jax.random.key(0) if key is None else key
     if not bool(np.isfinite(np.asarray(lf.views)).all()):
         raise ValueError(f"light field {lf.name!r} contains NaN or Inf pixel values")
+    check_memory(config, lf.grid, lf.size, lf.disparity_range)
     d_max = check_cross_hair(lf, config.edges)
     views = jnp.asarray(lf.views)
     seconds: dict[str, float] = {}
@@ -98,6 +106,7 @@ def estimate_disparity(
             progress(stage, "compile")
         execute, c_seconds = STAGE_CACHE.compile(fn, *args, **static)
         compile_total += c_seconds
+        check_compiled_memory(stage, execute.func)
         if progress:
             progress(stage, "run")
         t0 = time.perf_counter()
@@ -118,6 +127,7 @@ def estimate_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=compile_total,
+        diagnostics=diagnose(lf, config, edges, surface, rec.disparity),
     )
 
 
@@ -326,6 +336,7 @@ def optimize_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=result.compile_seconds + compile_seconds,
+        diagnostics=result.diagnostics,
     )
     info = {
         "optimize_seconds": optimize_seconds,

@@ -347,6 +347,13 @@ def edge_epi_figure(
     )
 
 
+def result_diagnostics(result: Result) -> dict:
+    """``warnings`` (always a list) and ``solver`` (status per stage) of a `Result`."""
+    diag = dict(result.diagnostics)
+    diag["warnings"] = list(diag.get("warnings", []))
+    return diag
+
+
 def write_outputs(
     writer: OutputWriter,
     lf: LightField,
@@ -513,6 +520,7 @@ def write_outputs(
         "n_dropped_points": int(np.asarray(e.n_dropped)),
     }
     metrics.update(quality_metrics(lf, disp))
+    metrics.update(result_diagnostics(result))
     if lf.gt_disparity is not None:
         gt = np.asarray(lf.gt_disparity)
         gtm = np.asarray(lf.gt_mask)

@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._multigrid import build_hierarchy, vcycle
@@ -60,6 +61,18 @@ class SolverConfig(eqx.Module):
 _DEFAULT_CONFIG = SolverConfig()
 
 
+#: `SolveResult.status`: the relative residual met ``rtol`` (like ``lineax.RESULTS.successful``).
+CONVERGED = 0
+#: `SolveResult.status`: stopped at ``max_iters`` (or stalled at the precision floor) above
+#: ``rtol`` (like ``lineax.RESULTS.max_steps_reached``).
+MAX_STEPS = 1
+#: `SolveResult.status`: NaN/Inf in the solution or residual (like
+#: ``lineax.RESULTS.nonfinite_input``): non-finite or negative weights or targets.
+NONFINITE = 2
+#: Names of the status codes, indexed by code.
+STATUS_NAMES = ("converged", "max-steps", "non-finite")
+
+
 class SolveResult(eqx.Module):
     """Result of `solve_poisson`.
 
@@ -69,11 +82,68 @@ class SolveResult(eqx.Module):
             batched).
         residual: ``()`` relative residual ``‖W (b − A x)‖ / ‖W b‖`` reached,
             ``W = diag(A)^(-1)`` (0 when ``b == 0``), recomputed from ``x``.
+        status: ``()`` int32 per problem: `CONVERGED` (0), `MAX_STEPS` (1) or `NONFINITE`
+            (2); `STATUS_NAMES` names them (`describe_status`).
     """
 
     x: Float[Array, "... H W"]
     iterations: Int[Array, ...]
     residual: Float[Array, ...]
+    status: Int[Array, ...]
+
+
+def solve_status(x: Array, residual: Array, rtol: float) -> Int[Array, ...]:
+    """`CONVERGED` / `MAX_STEPS` / `NONFINITE` per problem from a solution ``(..., H, W)``
+    and its relative residual ``(...)`` (the residual may exceed ``rtol`` by float32
+    rounding of its recomputation: 1% slack)."""
+    x, residual = jax.lax.stop_gradient((x, residual))
+    finite = jnp.isfinite(residual) & jnp.all(jnp.isfinite(x), axis=(-2, -1))
+    ok = residual <= 1.01 * rtol
+    return jnp.where(finite, jnp.where(ok, CONVERGED, MAX_STEPS), NONFINITE).astype(jnp.int32)
+
+
+def describe_status(status) -> str:
+    """A summary of concrete status codes, e.g. ``"converged"`` or ``"2 of 8 max-steps"``.
+
+    Raises:
+        ValueError: on a code that is not a status.
+    """
+    codes = np.asarray(status).ravel()
+    if codes.size and (codes.min() < 0 or codes.max() >= len(STATUS_NAMES)):
+        raise ValueError(f"unknown solver status codes {sorted(set(codes.tolist()))}")
+    parts = [
+        f"{int((codes == k).sum())} of {codes.size} {name}" if codes.size > 1 else name
+        for k, name in enumerate(STATUS_NAMES)
+        if k != CONVERGED and (codes == k).any()
+    ]
+    return "; ".join(parts) if parts else "converged"
+
+
+#: Weights down to ``-_NEGATIVE_SLACK * max(1, max |w|)`` count as zero (rounding).
+_NEGATIVE_SLACK = 1e-5
+
+
+def _check_values(**arrays) -> None:
+    """Raise on NaN/Inf anywhere or negative weights, for concrete (non-traced) arrays."""
+    for name, a in arrays.items():
+        if a is None or isinstance(a, jax.core.Tracer):
+            continue
+        v = np.asarray(a)
+        bad = ~np.isfinite(v)
+        if bad.any():
+            raise ValueError(
+                f"{name} has {int(bad.sum())} NaN/Inf values (of {v.size}); the solve needs "
+                "finite weights and targets"
+            )
+        if name in ("data_weight", "weight_x", "weight_y") and v.size:
+            # rounding slack (finite-difference probes step weights of 0 slightly below it)
+            floor = -_NEGATIVE_SLACK * max(1.0, float(np.abs(v).max()))
+            neg = v < floor
+            if neg.any():
+                raise ValueError(
+                    f"{name} has {int(neg.sum())} negative values (min {float(v.min()):.4g}); "
+                    "weights must be >= 0"
+                )
 
 
 def _check_shapes(data_weight, target, weight_x, weight_y, x0):
@@ -223,10 +293,14 @@ def solve_poisson(
 
     Returns:
         `SolveResult` with ``x`` ``(..., H, W)`` in the floating dtype of the inputs,
-        ``iterations`` ``(...)`` int32 and ``residual`` ``(...)``.
+        ``iterations`` ``(...)`` int32, ``residual`` ``(...)`` and ``status`` ``(...)``
+        int32 (`CONVERGED`, `MAX_STEPS` or `NONFINITE`; under ``jit`` non-finite or
+        negative inputs show here as `NONFINITE` or `MAX_STEPS`).
 
     Raises:
-        ValueError: if the shapes disagree (the message quotes them).
+        ValueError: if the shapes disagree (the message quotes them); for concrete
+            (non-traced) inputs also on NaN/Inf in any input or negative weights, before
+            solving.
 
     References:
         Thesis Sec. 4.2 (eqs 4.8–4.11) and Ch. 6 (eqs 6.1, 6.4); SPEC §5.
@@ -237,6 +311,9 @@ def solve_poisson(
     weight_y = jnp.asarray(weight_y)
     x0 = None if x0 is None else jnp.asarray(x0)
     batch = _check_shapes(data_weight, target, weight_x, weight_y, x0)
+    _check_values(
+        data_weight=data_weight, target=target, weight_x=weight_x, weight_y=weight_y, x0=x0
+    )
     dtype = jnp.result_type(data_weight, target, weight_x, weight_y, jnp.float32)
     if not jnp.issubdtype(dtype, jnp.floating):
         dtype = jnp.float32
@@ -246,7 +323,8 @@ def solve_poisson(
     for _ in batch:
         solve = jax.vmap(solve)
     x, k, res = solve(lam, S, wx, wy, x0)
-    return SolveResult(x=x, iterations=k, residual=res)
+    status = solve_status(x, res, float(config.rtol))
+    return SolveResult(x=x, iterations=k, residual=res, status=status)
 
 
 def solve_poisson_lineax(
@@ -329,4 +407,5 @@ def solve_poisson_lineax(
     rr = w * (b - matvec(x, lam, wx, wy))
     res = jnp.sqrt(jnp.sum(rr * rr)) / jnp.where(wbn > 0, wbn, 1.0)
     steps = sol.stats.get("num_steps", jnp.zeros((), jnp.int32))
-    return SolveResult(x=x, iterations=jnp.asarray(steps, jnp.int32), residual=res)
+    status = solve_status(x, res, float(config.rtol))
+    return SolveResult(x=x, iterations=jnp.asarray(steps, jnp.int32), residual=res, status=status)

@@ -101,7 +101,7 @@ def test_info_transpose_flag(tmp_path, synth):
     ],
 )
 def test_info_bad_input(tmp_path, synth, args, code, message):
-    hci = synth.hci4d(tmp_path / "hci", synth.views(9, 9, 8, 8))
+    hci = synth.hci4d(tmp_path / "hci", synth.views(9, 9, 16, 16))
     empty = tmp_path / "empty"
     empty.mkdir()
     args = [a.format(tmp=empty, hci=hci) for a in args]
@@ -117,9 +117,9 @@ def test_group_lists_info():
 
 
 def test_info_many_gt_views_are_summarised(tmp_path, synth):
-    folder = synth.hci4d(tmp_path / "h", synth.views(3, 3, 8, 8))
+    folder = synth.hci4d(tmp_path / "h", synth.views(3, 3, 16, 16))
     for k in range(9):
-        write_pfm(folder / f"gt_disp_lowres_Cam{k:03d}.pfm", np.full((8, 8), k, np.float32))
+        write_pfm(folder / f"gt_disp_lowres_Cam{k:03d}.pfm", np.full((16, 16), k, np.float32))
     res = _run("info", str(folder))
     assert res.exit_code == 0, res.output
     lines = res.output.splitlines()

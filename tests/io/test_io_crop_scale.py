@@ -8,7 +8,7 @@ import pytest
 
 from mvedge_jax.io import crop_window, load_light_field, load_light_field_with_info, write_pfm
 
-H, W = 24, 32
+H, W = 48, 64
 
 
 @pytest.mark.parametrize(
@@ -77,11 +77,11 @@ def test_downscale_views_and_gt(tmp_path, synth):
 
 
 def test_downscale_odd_size_and_scale_one(tmp_path, synth):
-    folder = synth.grid(tmp_path / "g", synth.views(3, 3, 23, 31))
-    # round(11.5) = 12, round(15.5) = 16 (half to even)
-    assert load_light_field(folder, scale=0.5, transpose=False).size == (12, 16)
-    assert load_light_field(folder, scale=1.0, transpose=False).size == (23, 31)
-    assert load_light_field(folder, scale=0.3, transpose=False).size == (7, 9)
+    folder = synth.grid(tmp_path / "g", synth.views(3, 3, 47, 63))
+    # round(23.5) = 24, round(31.5) = 32 (half to even)
+    assert load_light_field(folder, scale=0.5, transpose=False).size == (24, 32)
+    assert load_light_field(folder, scale=1.0, transpose=False).size == (47, 63)
+    assert load_light_field(folder, scale=0.4, transpose=False).size == (19, 25)
 
 
 def test_downscale_gt_mask_footprint(tmp_path, synth):

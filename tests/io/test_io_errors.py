@@ -113,14 +113,14 @@ def test_fewer_than_three_views(tmp_path, synth, grid):
     ],
 )
 def test_bad_crop(tmp_path, synth, views, match):
-    folder = synth.hci4d(tmp_path / "s", synth.views(9, 9, 8, 8))
+    folder = synth.hci4d(tmp_path / "s", synth.views(9, 9, 16, 16))
     with pytest.raises(ValueError, match=match):
         load_light_field(folder, views=views)
 
 
 @pytest.mark.parametrize("scale", [0, -0.5, 1.5, float("nan"), "half"])
 def test_bad_scale(tmp_path, synth, scale):
-    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 8, 8))
+    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 16, 16))
     with pytest.raises(ValueError, match="scale"):
         load_light_field(folder, scale=scale)
 
@@ -212,7 +212,7 @@ def test_hci_old_malformed_attributes(tmp_path, synth):
 
 
 def test_malformed_parameters_cfg(tmp_path, synth):
-    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 8, 8))
+    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 16, 16))
     (folder / "parameters.cfg").write_text("[meta]\ndisp_min = low\ndisp_max = 1\n")
     with pytest.raises(ValueError, match=r"disp_min = 'low' is not a number"):
         load_light_field(folder)
@@ -222,7 +222,7 @@ def test_malformed_parameters_cfg(tmp_path, synth):
 
 
 def test_ambiguous_grid_families(tmp_path, synth):
-    v = synth.views(3, 3, 8, 8)
+    v = synth.views(3, 3, 16, 16)
     synth.grid(tmp_path, v, lambda r, c: f"view_{r}_{c}.png")
     synth.grid(tmp_path, v, lambda r, c: f"disp_{r}_{c}.png")
     with pytest.raises(ValueError, match=r"ambiguous view grid.*disp_RR_CC.png.*view_RR_CC.png"):
@@ -230,7 +230,7 @@ def test_ambiguous_grid_families(tmp_path, synth):
 
 
 def test_duplicate_view(tmp_path, synth):
-    v = synth.views(3, 3, 8, 8)
+    v = synth.views(3, 3, 16, 16)
     synth.grid(tmp_path, v, lambda r, c: f"a_{3 * r + c:03d}_{r}_{c}.png")
     synth.rgb(tmp_path / "a_100_1_1.png", v[1, 1])
     with pytest.raises(ValueError, match=r"two files for view 01_01"):
@@ -238,15 +238,15 @@ def test_duplicate_view(tmp_path, synth):
 
 
 def test_hci_camera_index_outside_grid(tmp_path, synth):
-    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 8, 8))
-    synth.rgb(folder / "input_Cam009.png", np.zeros((8, 8, 3), np.uint8))
+    folder = synth.hci4d(tmp_path / "s", synth.views(3, 3, 16, 16))
+    synth.rgb(folder / "input_Cam009.png", np.zeros((16, 16, 3), np.uint8))
     with pytest.raises(ValueError, match=r"camera index 009 does not fit the 3x3 grid"):
         load_light_field(folder)
 
 
 def test_specific_readers_reject_other_layouts(tmp_path, synth):
-    grid = synth.grid(tmp_path / "g", synth.views(3, 3, 8, 8))
-    hci = synth.hci4d(tmp_path / "h", synth.views(3, 3, 8, 8))
+    grid = synth.grid(tmp_path / "g", synth.views(3, 3, 16, 16))
+    hci = synth.hci4d(tmp_path / "h", synth.views(3, 3, 16, 16))
     with pytest.raises(ValueError, match="not an HCI 4D folder"):
         read_hci4d(grid)
     with pytest.raises(ValueError, match="not an old HCI folder"):
@@ -256,6 +256,7 @@ def test_specific_readers_reject_other_layouts(tmp_path, synth):
 
 
 def test_input_folder_is_never_written(tmp_path, synth):
+    H, W = 32, 40  # scale 0.5 keeps the views above MIN_VIEW_SIZE
     gt = np.ones((H, W), np.float32)
     folders = [
         synth.hci4d(tmp_path / "h", synth.views(9, 9, H, W), gt=gt),

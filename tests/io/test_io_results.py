@@ -13,7 +13,7 @@ def test_output_inside_input_is_refused(tmp_path):
     src.mkdir()
     with pytest.raises(ValueError, match="inside the input folder"):
         check_output_dir(src / "out", src, force=True)
-    with pytest.raises(ValueError, match="inside the input folder"):
+    with pytest.raises(ValueError, match="is the input folder"):
         check_output_dir(src, src, force=True)
 
 
