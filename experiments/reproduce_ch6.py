@@ -47,6 +47,7 @@ from pathlib import Path
 import equinox as eqx
 import jax
 import numpy as np
+import tomllib
 
 jax.config.update(
     "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache")
@@ -55,7 +56,12 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 from mvedge_jax.io import OutputWriter, load_light_field  # noqa: E402
 from mvedge_jax.metrics import benchmark_metrics, depth_metrics  # noqa: E402
-from mvedge_jax.pipeline import PipelineConfig, estimate_disparity, write_outputs  # noqa: E402
+from mvedge_jax.pipeline import (  # noqa: E402
+    PipelineConfig,
+    config_from_dict,
+    estimate_disparity,
+    write_outputs,
+)
 from mvedge_jax.reconstruct import ReconstructConfig, centre_disparity, sharpen  # noqa: E402
 from mvedge_jax.synthetic import VARIANTS, default_light_field  # noqa: E402
 
@@ -96,9 +102,9 @@ LOO_GRID = {
 }
 
 
-def run_scene(lf, out_root: str | None) -> dict:
+def run_scene(lf, out_root: str | None, config: PipelineConfig | None = None) -> dict:
     t0 = time.perf_counter()
-    result = estimate_disparity(lf)
+    result = estimate_disparity(lf, config)
     total = time.perf_counter() - t0
     if out_root:
         writer = OutputWriter(Path(out_root) / lf.name)
@@ -257,6 +263,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sensitivity", action="store_true", help="one-at-a-time sensitivity")
     ap.add_argument("--loo", action="store_true", help="leave-one-scene-out table")
     ap.add_argument("--cache", help="folder of cached edges/surfaces (with --loo/--sensitivity)")
+    ap.add_argument("--config", help="a TOML pipeline config (as `mvedge depth --config`)")
     ap.add_argument("--grid", help="--loo grid, e.g. 'wmf_sigma=0.025,0.05;conf_beta=3,10'")
     args = ap.parse_args(argv)
     if args.sensitivity or args.loo:
@@ -268,6 +275,9 @@ def main(argv=None) -> int:
         if args.json:
             Path(args.json).write_text(json.dumps(out, indent=2) + "\n")
         return 0
+    config = None
+    if args.config:
+        config = config_from_dict(tomllib.loads(Path(args.config).read_text()))
     scenes = args.scenes or [str(DATA / s) for s in GT_SCENES]
     lfs = [(s, None) for s in scenes]
     if not args.scenes and not args.no_synthetic:
@@ -286,7 +296,7 @@ def main(argv=None) -> int:
     for path, lf in lfs:
         if lf is None:
             lf = load_scene(path) if path in VALIDATION_SCENES else load_light_field(path)
-        m = run_scene(lf, args.out)
+        m = run_scene(lf, args.out, config)
         rows.append(m)
         st = m["seconds_per_stage"]
         ref = ""
