@@ -2,16 +2,17 @@
 
 Usage:
     python experiments/reproduce_ch6.py [SCENE_DIR ...] [--json OUT.json] [--out DIR]
-        [--no-synthetic] [--variants]
+        [--no-synthetic] [--variants] [--config PIPELINE.toml]
     python experiments/reproduce_ch6.py --sensitivity [--cache DIR] [--json OUT.json]
-    python experiments/reproduce_ch6.py --loo [--cache DIR] [--json OUT.json]
+    python experiments/reproduce_ch6.py --loo [--grid 'NAME=V1,V2;NAME2=V3,V4'] [--cache DIR]
+        [--json OUT.json]
 
 Without arguments it runs every ground-truth scene in ``$MVEDGE_DATA`` (default
 ``../shared/data``): backgammon, antinous, stillLife, and the synthetic default scene (with
 ``--variants`` also the synthetic variants of `mvedge_jax.synthetic.VARIANTS`). Prints one
 row per scene, centre view: full frame (MSE×100, BadPix(0.01/0.03/0.07), Q25×100) and the
 HCI 4D benchmark protocol (`benchmark_metrics`: 15-px frame excluded, the toolkit's Q25;
-HCI scenes only), view consistency, the worst view's MSE×100 (scenes with GT in every view),
+every scene with GT), view consistency, the worst view's MSE×100 (scenes with GT in every view),
 seconds per stage, and for scenes the thesis used, the thesis' Table 6.1 numbers beside them.
 With ``--out``, the full `mvedge depth` outputs (PFMs, PNGs, metrics.json) are written per
 scene.
@@ -23,11 +24,12 @@ scene with the default config (cached in ``--cache``, shared with
 ``experiments/error_split.py``); each candidate config then runs the centre-view part of the
 reconstruction (`centre_disparity` and `sharpen`; only array leaves change, so nothing
 recompiles) and is scored by the centre view's MSE×100 against GT (the propagation changes the
-centre view by less than 0.01 MSE×100 on every scene, experiments/error_split.py).
+centre view's MSE×100 by less than 0.5 % on every scene, experiments/error_split.py).
 
 - ``--sensitivity``: one parameter at a time, each value of `SENSITIVITY`; prints per scene
   the MSE×100 ratio to the default and the geometric mean over scenes.
-- ``--loo``: every combination of `LOO_GRID`; for each held-out scene the combination with the
+- ``--loo``: every combination of `LOO_GRID` (or of ``--grid``: array fields of
+  `ReconstructConfig`); for each held-out scene the combination with the
   lowest geometric-mean MSE×100 ratio to the default over the OTHER scenes is picked and its
   held-out MSE×100 and BadPix(0.07) are reported beside the default's (the leave-one-out
   table).
