@@ -167,7 +167,7 @@ def variant_scene(
     * ``"textureless"``: uniform-colour surfaces (a slanted floor, a disc, a panel) among
       textured ones; their interiors have no edge; disparities in [−1.6, 1.25].
     * ``"slanted"``: every surface slanted, slopes up to 0.045 px per view step per pixel;
-      disparities in about [−2, 2.6].
+      disparities in about [−1.7, 2.4].
     * ``"thin"``: bars 2–5 px wide at disparities 0.3–1.5 in front of a textured wall (−1.2)
       and board (−0.5).
     * ``"wide"``: `make_scene` with ``disparity_range = (−4, 4)`` (GT within ±4 px per view
