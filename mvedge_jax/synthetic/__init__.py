@@ -7,3 +7,4 @@ from ._scene import Surface as Surface
 from ._scene import default_light_field as default_light_field
 from ._scene import make_scene as make_scene
 from ._scene import render_surfaces as render_surfaces
+from ._variants import VARIANTS, variant_scene, variant_scenes  # noqa: F401

@@ -1,0 +1,252 @@
+"""Where the Ch. 6 error is: split by region and by stage with oracle substitutions.
+
+Usage:
+    python experiments/error_split.py [SCENE ...] [--cache DIR] [--json OUT.json]
+
+SCENE: ``backgammon``, ``antinous`` (full resolution from ``$MVEDGE_DATA``), ``default`` (the
+synthetic default scene) or a synthetic variant (``textureless``, ``slanted``, ``thin``,
+``wide``; 9×9×128²); default: all of them. The default `PipelineConfig` is used throughout.
+
+Regions of the centre view (from its ground truth and colour):
+
+- ``edge``: within 3 px (7×7 window) of a depth discontinuity, a 4-neighbour GT step
+  ``|Δgt| > 0.1`` px per view step;
+- ``textureless``: not ``edge``, and the CIELAB gradient magnitude (Gaussian σ = 1, Sobel,
+  Euclidean over channels; CIELAB units per pixel) stays below 2 within 3 px: no colour edge
+  an edge detector could find nearby (`oracle_edges`' threshold);
+- ``smooth``: the rest (textured interiors of surfaces).
+
+Stages, each a centre-view map (rows of the table):
+
+1. ``detected``: the pipeline's edges and surface vectors → centre diffusion (eq 6.1);
+   ``+sharpen``: after the sharpening (`sharpen`: photo-consistent snapping, boundary matte,
+   weighted median); ``+propagate``: the pipeline's final centre view (mean of its row and
+   column EPI inpainting).
+2. ``GT sides``: detected points and labels, each surface vector turned to the side whose GT
+   (1.5 px away) is closer to the label (on texture edges both sides have about the same GT
+   and the turn changes little) → diffusion / +sharpen. The printed wrong-side share counts
+   the points at depth edges only (GT on the two sides differs by more than 0.1).
+3. ``GT labels``: detected points and sides, each visible point's label replaced by the GT
+   1.5 px from it on its side → diffusion / +sharpen.
+4. ``oracle``: `oracle_edges` (points from the colour gradient, GT labels and sides, GT
+   depth-edge confidence) → diffusion / +sharpen: the interpolation ceiling.
+
+Reading the table: ``detected`` − ``GT labels`` is what label errors of the edge stage cost;
+``detected`` − ``GT sides`` what wrong surface sides cost; ``oracle`` is what diffusion from
+edge samples achieves with a perfect edge model; the ``+sharpen`` and ``+propagate`` rows
+show what those steps add or remove. Also printed: the share of visible edge points whose
+label is off by more than 0.07 (and 0.3) from the GT on their side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy import ndimage
+
+jax.config.update(
+    "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache")
+)
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+from mvedge_jax.io import load_light_field  # noqa: E402
+from mvedge_jax.lightfield import rgb_to_lab  # noqa: E402
+from mvedge_jax.metrics import depth_metrics  # noqa: E402
+from mvedge_jax.pipeline import PipelineConfig, estimate_disparity  # noqa: E402
+from mvedge_jax.reconstruct import centre_disparity, sharpen  # noqa: E402
+from mvedge_jax.reconstruct._oracle import oracle_edges  # noqa: E402
+from mvedge_jax.synthetic import VARIANTS, default_light_field, variant_scene  # noqa: E402
+
+DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+REAL = {"backgammon": "hci4d/stratified/backgammon", "antinous": "hci4d/additional/antinous"}
+SCENES = ("backgammon", "antinous", "default", *VARIANTS)
+REGIONS = ("all", "edge", "smooth", "textureless")
+EDGE_STEP = 0.1  # px per view step
+EDGE_RADIUS = 3  # px
+TEXTURE_GRAD = 2.0  # CIELAB units per pixel
+SIDE_DIST = 1.5  # px
+
+
+def load_scene(name: str):
+    """The light field of a scene name of `SCENES`."""
+    if name in REAL:
+        return load_light_field(DATA / REAL[name])
+    if name == "default":
+        return default_light_field()
+    return variant_scene(name)
+
+
+def colour_gradient(img: np.ndarray) -> np.ndarray:
+    """CIELAB gradient magnitude ``(H, W)`` (σ = 1 blur, Sobel/8, Euclidean over channels)."""
+    lab = cv2.GaussianBlur(np.asarray(rgb_to_lab(jnp.asarray(img))), (0, 0), 1.0)
+    gx = np.stack([cv2.Sobel(lab[..., c], cv2.CV_32F, 1, 0, ksize=3) / 8 for c in range(3)], -1)
+    gy = np.stack([cv2.Sobel(lab[..., c], cv2.CV_32F, 0, 1, ksize=3) / 8 for c in range(3)], -1)
+    return np.sqrt((gx**2 + gy**2).sum(-1))
+
+
+def regions(gt: np.ndarray, img: np.ndarray) -> dict[str, np.ndarray]:
+    """The ``all``/``edge``/``smooth``/``textureless`` masks of the module docstring."""
+    jump = np.zeros(gt.shape, np.uint8)
+    dx = np.abs(np.diff(gt, axis=1)) > EDGE_STEP
+    dy = np.abs(np.diff(gt, axis=0)) > EDGE_STEP
+    jump[:, 1:] |= dx
+    jump[:, :-1] |= dx
+    jump[1:] |= dy
+    jump[:-1] |= dy
+    k = np.ones((2 * EDGE_RADIUS + 1,) * 2, np.uint8)
+    edge = cv2.dilate(jump, k) > 0
+    near_colour = cv2.dilate((colour_gradient(img) >= TEXTURE_GRAD).astype(np.uint8), k) > 0
+    textureless = ~edge & ~near_colour
+    return {
+        "all": np.ones(gt.shape, bool),
+        "edge": edge,
+        "smooth": ~edge & ~textureless,
+        "textureless": textureless,
+    }
+
+
+def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return ndimage.map_coordinates(img.astype(np.float32), [y, x], order=1, mode="nearest")
+
+
+def side_oracles(edges, surface, gt: np.ndarray):
+    """``(edges with GT labels, surface with GT sides, label error stats)`` (see module doc)."""
+    x, y = np.asarray(edges.x), np.asarray(edges.y)
+    off = np.asarray(surface.offset)
+    lab = np.asarray(edges.disparity)
+    use = np.asarray(edges.valid) & np.asarray(edges.visible)
+    g_fwd = _bilinear(gt, x + SIDE_DIST * off[:, 0], y + SIDE_DIST * off[:, 1])
+    g_bwd = _bilinear(gt, x - SIDE_DIST * off[:, 0], y - SIDE_DIST * off[:, 1])
+    new_lab = np.where(use, g_fwd, lab).astype(np.float32)
+    flip = use & (np.abs(g_bwd - lab) < np.abs(g_fwd - lab))
+    at_depth_edge = use & (np.abs(g_fwd - g_bwd) > EDGE_STEP)
+    new_off = np.where(flip[:, None], -off, off).astype(np.float32)
+    err = np.abs(lab - g_fwd)[use]
+    stats = {
+        "points": int(use.sum()),
+        "label_err>0.07_%": float(100 * np.mean(err > 0.07)),
+        "label_err>0.3_%": float(100 * np.mean(err > 0.3)),
+        "depth_edge_points": int(at_depth_edge.sum()),
+        "wrong_side_%": float(100 * (flip & at_depth_edge).sum() / max(1, at_depth_edge.sum())),
+    }
+    gt_labels = eqx.tree_at(lambda e: e.disparity, edges, jnp.asarray(new_lab))
+    gt_sides = eqx.tree_at(lambda s: s.offset, surface, jnp.asarray(new_off))
+    return gt_labels, gt_sides, stats
+
+
+def run_pipeline(lf, config: PipelineConfig, cache: Path | None) -> dict:
+    """The pipeline's edges, surface and centre maps (cached by scene name)."""
+    path = cache / f"{lf.name}.pkl" if cache else None
+    if path and path.is_file():
+        return pickle.loads(path.read_bytes())
+    r = estimate_disparity(lf, config)
+    rc, cc = lf.centre_index
+    out = {
+        "final": np.asarray(r.disparity[rc, cc]),
+        "centre": np.asarray(r.reconstruction.centre),
+        "sharp": np.asarray(r.reconstruction.centre_sharp),
+        "edges": jax.tree.map(np.asarray, r.edges),
+        "surface": jax.tree.map(np.asarray, r.surface),
+    }
+    if path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(pickle.dumps(out))
+    return out
+
+
+def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
+    """Rows ``{stage: {region: MSE×100, "bp07": BadPix(0.07) over all}}`` and label stats."""
+    rc, cc = lf.centre_index
+    views = lf.views
+    img = np.asarray(lf.centre_view)
+    gt = np.asarray(lf.gt_disparity[rc, cc])
+    masks = regions(gt, img)
+    base = run_pipeline(lf, config, cache)
+    edges = jax.tree.map(jnp.asarray, base["edges"])
+    surface = jax.tree.map(jnp.asarray, base["surface"])
+    rcfg = config.reconstruct
+    diffuse = jax.jit(lambda e, s, v: centre_disparity(e, s, v, rcfg))
+    maps = {
+        "detected": base["centre"],
+        "detected +sharpen": base["sharp"],
+        "detected +propagate": base["final"],
+    }
+    gt_labels, gt_sides, stats = side_oracles(edges, surface, gt)
+    o_edges, o_surface = oracle_edges(img, gt, grid=lf.grid)
+    for label, (e, s) in {
+        "GT sides": (edges, gt_sides),
+        "GT labels": (gt_labels, surface),
+        "oracle": (o_edges, o_surface),
+    }.items():
+        c = np.asarray(diffuse(e, s, jnp.asarray(img)))
+        maps[label] = c
+        maps[f"{label} +sharpen"] = np.asarray(sharpen(views, c, rcfg))
+    rows = {}
+    for stage, m in maps.items():
+        row = {r: depth_metrics(m, gt, masks[r])["mse_x100"] for r in REGIONS}
+        row["bp07"] = depth_metrics(m, gt)["badpix_0.07"]
+        rows[stage] = row
+    share = {r: float(100 * masks[r].mean()) for r in REGIONS}
+    return {"scene": lf.name, "rows": rows, "region_share_%": share, "labels": stats}
+
+
+def print_table(results: list[dict]) -> None:
+    head = f"{'scene':<22}{'stage':<22}" + "".join(f"{r:>12}" for r in REGIONS) + f"{'BP.07':>8}"
+    print("MSE×100 of the centre view by region (share of pixels in brackets); BadPix(0.07) all")
+    print(head)
+    print("-" * len(head))
+    for res in results:
+        sh = res["region_share_%"]
+        print(f"{res['scene']:<22}{'(share %)':<22}" + "".join(f"{sh[r]:>12.1f}" for r in REGIONS))
+        for stage, row in res["rows"].items():
+            print(
+                f"{'':<22}{stage:<22}"
+                + "".join(f"{row[r]:>12.3f}" for r in REGIONS)
+                + f"{row['bp07']:>8.2f}"
+            )
+        st = res["labels"]
+        print(
+            f"{'':<22}labels: {st['points']} visible points, "
+            f"{st['label_err>0.07_%']:.1f}% off > 0.07, {st['label_err>0.3_%']:.1f}% off > 0.3, "
+            f"{st['wrong_side_%']:.1f}% of the {st['depth_edge_points']} at depth edges on the "
+            "wrong side"
+        )
+        sys.stdout.flush()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("scenes", nargs="*", help=f"scenes among {', '.join(SCENES)} (default: all)")
+    ap.add_argument("--cache", help="folder for the pipeline results per scene (reused)")
+    ap.add_argument("--json", help="write the results as JSON")
+    args = ap.parse_args(argv)
+    unknown = set(args.scenes) - set(SCENES)
+    if unknown:
+        ap.error(f"unknown scenes {sorted(unknown)}; use {', '.join(SCENES)}")
+    cache = Path(args.cache) if args.cache else None
+    config = PipelineConfig()
+    results = []
+    for name in args.scenes or SCENES:
+        t0 = time.perf_counter()
+        res = split_scene(load_scene(name), config, cache)
+        res["seconds"] = time.perf_counter() - t0
+        results.append(res)
+        print_table([res])
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
