@@ -15,6 +15,7 @@ from ._render import view_sweep as view_sweep
 from ._segment import EPISegments as EPISegments
 from ._segment import match_lines as match_lines
 from ._segment import render_segments as render_segments
+from ._segment import resolve_unknown as resolve_unknown
 from ._segment import segment_epis as segment_epis
 from ._superpixels import SuperpixelResult as SuperpixelResult
 from ._superpixels import kmeans_superpixels as kmeans_superpixels

@@ -43,6 +43,10 @@ class EPISegments(eqx.Module):
         left_pos, left_disp: ``(E, S)`` float32, the segment's left line.
         right_pos, right_disp: ``(E, S)`` float32, its right line.
         disparity: ``(E, S)`` float32, the segment's disparity (its depth order).
+        known: ``(E, S)`` bool, the disparity came from a bounding line whose surface faces
+            the segment (else it is a placeholder; see `match_lines`).
+        left_cut, right_cut: ``(E, S)`` bool, the bounding line was added by splitting (its
+            disparity is the segment's).
         valid: ``(E, S)`` bool.
         n_dropped: ``()`` int32, lines and segments lost to the capacities.
     """
@@ -52,8 +56,26 @@ class EPISegments(eqx.Module):
     right_pos: Float[Array, "E S"]
     right_disp: Float[Array, "E S"]
     disparity: Float[Array, "E S"]
+    known: Array
+    left_cut: Array
+    right_cut: Array
     valid: Array
     n_dropped: Int[Array, ""]
+
+    def with_disparity(self, disparity: Float[Array, "E S"], known: Array) -> EPISegments:
+        """The same segments with new disparities (cut lines follow their segment's)."""
+        return EPISegments(
+            left_pos=self.left_pos,
+            left_disp=jnp.where(self.left_cut, disparity, self.left_disp),
+            right_pos=self.right_pos,
+            right_disp=jnp.where(self.right_cut, disparity, self.right_disp),
+            disparity=disparity,
+            known=known,
+            left_cut=self.left_cut,
+            right_cut=self.right_cut,
+            valid=self.valid,
+            n_dropped=self.n_dropped,
+        )
 
 
 def _lsa_pairs(weight: np.ndarray, allowed: np.ndarray) -> list[tuple[int, int]]:
@@ -100,10 +122,12 @@ def match_lines(
     unmatched).
 
     A segment's disparity is the smallest (deepest) disparity of its bounding lines whose
-    surface vector points into it; when neither does, the smallest of both (thesis: "the
-    larger (deeper) slope of the two segment lines"); between two borders,
-    ``fallback_disparity``. Segments wider than ``config.split_width`` on the centre row are
-    split into equal parts by lines of the segment's disparity.
+    surface vector points into it (thesis: "the larger (deeper) slope of the two segment
+    lines"). When neither line's surface faces the segment, its surface lies behind both and
+    its depth is unknown here: it is marked ``known = 0`` with the smaller line disparity (or
+    ``fallback_disparity`` between two borders) as a placeholder, to be resolved from the
+    other EPI direction (`resolve_unknown`). Segments wider than ``config.split_width`` on the
+    centre row are split into equal parts by lines ("cuts") of the segment's disparity.
 
     Args:
         pos: ``(n,)`` centre-row positions, ascending (pixels).
@@ -115,7 +139,8 @@ def match_lines(
         fallback_disparity: disparity of a segment bounded only by image borders.
 
     Returns:
-        ``(m, 5)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity)``.
+        ``(m, 8)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity,
+        known, left_is_cut, right_is_cut)``.
 
     References:
         Thesis Sec. 4.2.1, Alg. 2, eq 4.7, Fig. 4.4.
@@ -162,17 +187,22 @@ def match_lines(
     pairs += _lsa_pairs(weight, allowed2)
     rows = []
     for i, j in pairs:
-        cands = [D[k] for k, s in ((i, 1), (j, -1)) if not border[k] and side[k] == s]
-        if not cands:
-            cands = [D[k] for k in (i, j) if not border[k]]
-        d = min(cands) if cands else fallback_disparity
+        facing = [D[k] for k, s in ((i, 1), (j, -1)) if not border[k] and side[k] == s]
+        if facing:
+            d, known = min(facing), 1.0
+        else:  # the surface lies behind both lines: its depth is resolved later
+            lines = [D[k] for k in (i, j) if not border[k]]
+            d, known = (min(lines) if lines else fallback_disparity), 0.0
         w = P[j] - P[i]
         parts = max(1, math.ceil(w / config.split_width))
-        cuts = (
-            [(P[i], D[i])] + [(P[i] + w * q / parts, d) for q in range(1, parts)] + [(P[j], D[j])]
-        )
-        rows += [(a[0], a[1], b[0], b[1], d) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
-    return np.asarray(rows, np.float64).reshape(-1, 5)
+        cuts = [(P[i], D[i], 0.0)]
+        cuts += [(P[i] + w * q / parts, d, 1.0) for q in range(1, parts)]
+        cuts += [(P[j], D[j], 0.0)]
+        rows += [
+            (a[0], a[1], b[0], b[1], d, known, a[2], b[2])
+            for a, b in zip(cuts[:-1], cuts[1:], strict=True)
+        ]
+    return np.asarray(rows, np.float64).reshape(-1, 8)
 
 
 def _epi_lines(
@@ -271,7 +301,7 @@ def segment_epis(
     all_d = np.concatenate([dd for _, dd, _ in lines]) if lines else np.zeros(0)
     fallback = float(np.median(all_d)) if all_d.size else 0.0
     S = config.segments_per_epi(width)
-    table = np.zeros((n_epis, S, 5), np.float32)
+    table = np.zeros((n_epis, S, 8), np.float32)
     valid = np.zeros((n_epis, S), bool)
     for e, (p, d, s) in enumerate(lines):
         rows = match_lines(p, d, s, n_views, width, config, fallback)
@@ -293,18 +323,22 @@ def segment_epis(
         right_pos=t[..., 2],
         right_disp=t[..., 3],
         disparity=t[..., 4],
+        known=t[..., 5] > 0.5,
+        left_cut=t[..., 6] > 0.5,
+        right_cut=t[..., 7] > 0.5,
         valid=jnp.asarray(valid),
         n_dropped=jnp.asarray(dropped, jnp.int32),
     )
 
 
-def _render_one(lp, ld, rp, rd, disp, valid, n_views: int, width: int):
+def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int):
     t = (jnp.arange(n_views) - n_views // 2).astype(jnp.float32)[:, None]
     left = lp[None, :] - t * ld[None, :]  # (V, S)
     right = rp[None, :] - t * rd[None, :]
     x = jnp.arange(width, dtype=jnp.float32)[None, :, None]
     cov = (left[:, None, :] <= x) & (x < right[:, None, :]) & valid[None, None, :]
-    score = jnp.where(cov, disp[None, None, :], -jnp.inf)
+    order = jnp.where(known, disp, disp - 1e4)  # unresolved segments lie behind the rest
+    score = jnp.where(cov, order[None, None, :], -jnp.inf)
     idx = jnp.argmax(score, axis=-1).astype(jnp.int32)
     hit = cov.any(-1)
     return jnp.where(hit, idx, -1), jnp.where(hit, disp[idx], 0.0)
@@ -318,7 +352,8 @@ def render_segments(
 
     Pixel ``x`` of the row at view offset ``t`` is covered by a segment when
     ``left(t) <= x < right(t)`` with ``left(t) = left_pos - t left_disp`` (likewise right);
-    among covering segments the largest disparity wins (the nearest surface occludes).
+    among covering segments the largest disparity wins (the nearest surface occludes);
+    segments whose disparity is not ``known`` lie behind all known ones.
 
     Args:
         segments: `EPISegments` ``(E, S)``.
@@ -340,6 +375,55 @@ def render_segments(
         segments.right_pos,
         segments.right_disp,
         segments.disparity,
+        segments.known,
         segments.valid,
     )
     return jax.lax.map(fn, args, batch_size=batch_size)
+
+
+def resolve_unknown(
+    segments: EPISegments,
+    labels: Int[Array, "E n w"],
+    other_disparity: Float[Array, "E w"],
+    other_known: Array,
+    floor: float,
+) -> EPISegments:
+    """Disparity of the segments whose surface lies behind both bounding lines.
+
+    Such a segment takes the mean disparity that the other EPI direction gives its pixels on
+    the centre row (where that direction's segment is known). A segment no known pixel
+    covers lies behind both its lines in both directions and takes ``floor`` (the scene's
+    deepest disparity).
+
+    Args:
+        segments: `EPISegments` ``(E, S)`` of one direction.
+        labels: ``(E, n, w)`` its rendered segment labels (`render_segments`).
+        other_disparity: ``(E, w)`` the other direction's disparity on this direction's EPI
+            centre rows (the centre view, transposed as needed).
+        other_known: ``(E, w)`` bool, where ``other_disparity`` is known.
+        floor: disparity of last resort (pixels per view step), e.g. the scene's deepest.
+
+    Returns:
+        The segments with resolved disparities (``known`` set where resolved from the other
+        direction).
+
+    References:
+        Thesis Sec. 4.2.1 (segments regularised across the horizontal and vertical EPIs).
+    """
+    lab = np.asarray(labels)
+    E, n, _ = lab.shape
+    S = segments.valid.shape[1]
+    centre = lab[:, n // 2]
+    od, ok = np.asarray(other_disparity, np.float64), np.asarray(other_known)
+    ids = np.where((centre >= 0) & ok, np.arange(E)[:, None] * S + centre, E * S).ravel()
+    cnt = np.bincount(ids, minlength=E * S + 1)[:-1].reshape(E, S)
+    tot = np.bincount(ids, od.ravel(), minlength=E * S + 1)[:-1].reshape(E, S)
+    d = np.asarray(segments.disparity, np.float64).copy()
+    known = np.asarray(segments.known).copy()
+    valid = np.asarray(segments.valid)
+    todo = valid & ~known
+    got = todo & (cnt > 0)
+    d[got] = tot[got] / cnt[got]
+    d[todo & ~got] = np.minimum(floor, d[todo & ~got])
+    known = known | got
+    return segments.with_disparity(jnp.asarray(d, jnp.float32), jnp.asarray(known))

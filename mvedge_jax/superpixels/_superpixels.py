@@ -17,7 +17,7 @@ from ..lightfield import LightField, rgb_to_lab
 from ..surface import surface_vectors
 from ._config import SuperpixelConfig
 from ._label import forward_labels, nearest_fill, propagate_labels
-from ._segment import EPISegments, render_segments, segment_epis
+from ._segment import EPISegments, render_segments, resolve_unknown, segment_epis
 
 
 class SuperpixelResult(eqx.Module):
@@ -28,7 +28,8 @@ class SuperpixelResult(eqx.Module):
             same label means the same superpixel in every view).
         disparity: ``(U, V, H, W)`` float32 piece-wise constant disparity of every pixel
             (pixels per view step).
-        n_superpixels: number of clusters asked of k-means.
+        n_superpixels: number of k-means clusters (seeds on a regular grid of about
+            ``H W / size²`` cells).
         consistent_fraction: fraction of all light-field pixels whose label came from the
             agreeing horizontal and vertical segmentations (before propagation; 1 minus the
             projection holes for the baseline).
@@ -67,6 +68,13 @@ def _segment_colours(epi_lab, labels, n_segments_dummy):
 
 
 @jax.jit
+def _known_map(known, centre_labels):
+    """``(E, w)`` bool: the EPI centre-row pixel's segment has a known disparity."""
+    k = jnp.take_along_axis(known, jnp.maximum(centre_labels, 0), axis=1)
+    return (centre_labels >= 0) & k
+
+
+@jax.jit
 def _cluster_maps(table, seg_labels):
     """EPI segment labels ``(E, n, w)`` → cluster labels via ``table (E, S)`` (-1 stays)."""
     E = seg_labels.shape[0]
@@ -85,14 +93,18 @@ def _uniform_seeds(H: int, W: int, k: int) -> np.ndarray:
     return np.stack([gx.ravel(), gy.ravel()], -1)
 
 
-def _kmeans(xy: np.ndarray, feats: np.ndarray, H: int, W: int, k: int, iters: int) -> np.ndarray:
-    """scikit-learn k-means of weighted ``feats (N, F)`` from uniform seeds; returns labels."""
+def _kmeans(
+    xy: np.ndarray, feats: np.ndarray, H: int, W: int, k: int, iters: int
+) -> tuple[np.ndarray, int]:
+    """scikit-learn k-means of weighted ``feats (N, F)`` from about ``k`` uniform seeds (each
+    takes the features of the point nearest to it in the image; duplicates merged); returns
+    the labels and the number of clusters."""
     seeds = _uniform_seeds(H, W, k)
     _, nearest = cKDTree(xy).query(seeds)
     init = np.unique(feats[nearest], axis=0)
     init = init[: feats.shape[0]]
     km = KMeans(n_clusters=init.shape[0], init=init, n_init=1, max_iter=iters, algorithm="lloyd")
-    return km.fit_predict(feats).astype(np.int32)
+    return km.fit_predict(feats).astype(np.int32), int(init.shape[0])
 
 
 def _disparity_scale(lf: LightField, d: np.ndarray) -> tuple[float, float]:
@@ -178,7 +190,9 @@ def superpixels(
 
     1. Occlusion-aware EPI segmentation (Sec. 4.2.1): the lines of every horizontal EPI (centre
        row of views) and vertical EPI (centre column) are paired into depth-ordered segments
-       (`segment_epis`, Alg. 2) and rendered into EPI label maps (`render_segments`).
+       (`segment_epis`, Alg. 2) and rendered into EPI label maps (`render_segments`); a segment
+       whose bounding lines both face away from it (a surface seen between two nearer ones)
+       takes the other direction's disparity on the centre view (`resolve_unknown`).
     2. Clustering (Sec. 5.1.1): every segment with at least one visible pixel becomes a point
        ``(x, y, d, L*, a*, b*)`` (x, y: its centre on the centre view; d: its disparity,
        normalised to [0, 1] over the scene's range; colour: the mean CIELAB of its EPI
@@ -237,6 +251,23 @@ def superpixels(
     t0 = time.perf_counter()
     lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)  # (H, V, W)
     lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)  # (W, U, H)
+    # Segments behind both their lines take the other direction's centre-view disparity.
+    kh = _known_map(seg_h.known, lab_h[:, V // 2])  # (H, W)
+    kv = _known_map(seg_v.known, lab_v[:, U // 2])  # (W, H)
+    lines_d = np.asarray(edges.disparity)[np.asarray(edges.valid)]
+    floor = (
+        lf.disparity_range[0]
+        if lf.disparity_range is not None
+        else float(np.percentile(lines_d, 1))
+        if lines_d.size
+        else 0.0
+    )
+    seg_h, seg_v = (
+        resolve_unknown(seg_h, lab_h, disp_v[:, U // 2].T, kv.T, floor),
+        resolve_unknown(seg_v, lab_v, disp_h[:, V // 2].T, kh.T, floor),
+    )
+    lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)
+    lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)
     lab_views = rgb_to_lab(lf.views)
     epi_h = jnp.transpose(lab_views[rc], (1, 0, 2, 3))  # (H, V, W, 3)
     epi_v = jnp.transpose(lab_views[:, cc], (2, 0, 1, 3))  # (W, U, H, 3)
@@ -263,7 +294,7 @@ def superpixels(
     lo, span = _disparity_scale(lf, d_all)
     F = np.concatenate([_features(*f, lo, span, config) for f in feats])
     k = min(config.n_superpixels(H, W), xy.shape[0])
-    cluster = _kmeans(xy, F, H, W, k, config.kmeans_iters)
+    cluster, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
     n_h = where[0][0].size
     tables = []
     for (e, s), seg, lbl in zip(where, (seg_h, seg_v), (cluster[:n_h], cluster[n_h:]), strict=True):
@@ -370,7 +401,8 @@ def kmeans_superpixels(
     F = _features(gx.ravel(), gy.ravel(), d.ravel(), lab_c, lo, span, config)
     k = config.n_superpixels(H, W)
     xy = np.stack([gx.ravel(), gy.ravel()], -1)
-    centre = jnp.asarray(_kmeans(xy, F, H, W, k, config.kmeans_iters).reshape(H, W))
+    centre, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
+    centre = jnp.asarray(centre.reshape(H, W))
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     rs, cs = np.meshgrid(np.arange(U) - U // 2, np.arange(V) - V // 2, indexing="ij")
