@@ -255,11 +255,12 @@ def superpixels(
     kh = _known_map(seg_h.known, lab_h[:, V // 2])  # (H, W)
     kv = _known_map(seg_v.known, lab_v[:, U // 2])  # (W, H)
     lines_d = np.asarray(edges.disparity)[np.asarray(edges.valid)]
+    # The deepest surface seen: the 2nd percentile of the line disparities.
     floor = (
-        lf.disparity_range[0]
-        if lf.disparity_range is not None
-        else float(np.percentile(lines_d, 1))
+        float(np.percentile(lines_d, 2))
         if lines_d.size
+        else lf.disparity_range[0]
+        if lf.disparity_range is not None
         else 0.0
     )
     seg_h, seg_v = (
