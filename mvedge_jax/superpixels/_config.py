@@ -47,6 +47,10 @@ class SuperpixelConfig(eqx.Module):
         lab_scale: unit of the colour features: CIELAB is multiplied by this before
             ``weight_lab`` (1: L* in [0, 100]).
         kmeans_iters: Lloyd iterations of the clustering (scikit-learn ``max_iter``).
+        keep_disagreeing: where the horizontal and vertical segmentations disagree, keep the
+            nearer one's label (ties: the horizontal) instead of unlabelling the pixel (thesis:
+            unlabel, then propagate; keeping is more view-consistent, because each
+            segmentation alone is consistent across views).
         propagation_radius: label propagation (eq 5.1) looks for labelled pixels within this
             chessboard radius (pixels).
         propagation_passes: passes of the propagation; each fills unlabelled pixels within
@@ -81,6 +85,7 @@ class SuperpixelConfig(eqx.Module):
     weight_lab: float = eqx.field(static=True, default=3.0)
     lab_scale: float = eqx.field(static=True, default=0.2)
     kmeans_iters: int = eqx.field(static=True, default=20)
+    keep_disagreeing: bool = eqx.field(static=True, default=False)
     propagation_radius: int = eqx.field(static=True, default=2)
     propagation_passes: int = eqx.field(static=True, default=2)
     w_colour: Array = eqx.field(converter=_f32, default=1.0)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import time
 
 import equinox as eqx
@@ -144,12 +145,19 @@ def _project_both(row_l, row_d, col_l, col_d):
     return lh, dh, lv, dv  # each (U, V, H, W)
 
 
-@jax.jit
-def _project_agree(row_l, row_d, col_l, col_d):
-    """Labels of every view from both segmentations, kept where they agree."""
+@functools.partial(jax.jit, static_argnames=("keep",))
+def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
+    """Labels of every view from both segmentations, kept where they agree (with ``keep``,
+    a disagreeing pixel keeps the nearer segmentation's label, the horizontal on ties)."""
     lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
     agree = (lh >= 0) & (lh == lv)
-    return jnp.where(agree, lh, -1), jnp.where(agree, 0.5 * (dh + dv), 0.0)
+    lab = jnp.where(agree, lh, -1)
+    d = jnp.where(agree, 0.5 * (dh + dv), 0.0)
+    if keep:
+        use_v = (lv >= 0) & ((lh < 0) | (dv > dh))
+        lab = jnp.where(agree, lab, jnp.where(use_v, lv, lh))
+        d = jnp.where(agree, d, jnp.where(use_v, dv, dh))
+    return lab, d
 
 
 @jax.jit
@@ -202,7 +210,8 @@ def superpixels(
     3. Every view ``(r, c)`` receives the cluster labels of the horizontal segmentation of view
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
        shifted horizontally, by the segments' disparities (z-buffer: nearer wins); pixels where
-       the two disagree (or that neither reaches) are unlabelled.
+       the two disagree (or that neither reaches) are unlabelled (with
+       ``config.keep_disagreeing`` a disagreeing pixel keeps the nearer one's label instead).
     4. Label propagation (eq 5.1) on the cross-hair views, projection of those labels into the
        other views' unlabelled pixels, and nearest-labelled-pixel fill for the rest: every
        pixel of every view gets a label and a disparity.
@@ -311,8 +320,8 @@ def superpixels(
     row_d = jnp.transpose(disp_h, (1, 0, 2))
     col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
     col_d = jnp.transpose(disp_v, (1, 2, 0))
-    labels, disp = _project_agree(row_l, row_d, col_l, col_d)
-    consistent = float(jnp.mean(labels >= 0))
+    consistent = float(jnp.mean(_project_agree(row_l, row_d, col_l, col_d)[0] >= 0))
+    labels, disp = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
     # Propagation on the cross-hair (eq 5.1), then into the other views, then nearest fill.
     cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
     cross_d = jnp.concatenate([disp[rc], disp[:, cc]])

@@ -209,6 +209,19 @@ def _render(p, offsets, *, H: int, W: int, ss: int, chunk_pixels: int = 1 << 22)
     return jnp.concatenate(rgbs)[:n], jnp.concatenate(gts)[:n]
 
 
+def _check_scene(surfaces, grid, size) -> tuple[int, int, int, int]:
+    """``(U, V, H, W)`` of a scene to render; ValueError on an empty scene, bad grid or size."""
+    U, V = (int(g) for g in grid)
+    H, W = (int(s) for s in size)
+    if not surfaces:
+        raise ValueError("a scene needs at least one surface")
+    if U < 3 or V < 3:
+        raise ValueError(f"grid must be at least (3, 3); got {grid}")
+    if H < 2 or W < 2:
+        raise ValueError(f"size must be at least (2, 2); got {size}")
+    return U, V, H, W
+
+
 @functools.partial(jax.jit, static_argnames=("H", "W"))
 def _render_ids(p, offsets, *, H: int, W: int):
     """Index of the visible surface at the pixel centres of the views at ``offsets (N, 2)``."""
@@ -241,14 +254,7 @@ def render_object_ids(
     Raises:
         ValueError: on an empty scene, a bad grid or size.
     """
-    U, V = (int(g) for g in grid)
-    H, W = (int(s) for s in size)
-    if not surfaces:
-        raise ValueError("a scene needs at least one surface")
-    if U < 3 or V < 3:
-        raise ValueError(f"grid must be at least (3, 3); got {grid}")
-    if H < 2 or W < 2:
-        raise ValueError(f"size must be at least (2, 2); got {size}")
+    U, V, H, W = _check_scene(surfaces, grid, size)
     dr, dc = view_offsets(U, V)
     offsets = jnp.stack([dr.ravel(), dc.ravel()], axis=-1)
     ids = _render_ids(_pack(surfaces), offsets, H=H, W=W)
@@ -283,14 +289,7 @@ def render_surfaces(
         ValueError: on an empty scene, bad grid/size/supersample, a surface folding over in
             some view (``1 - b dc - c dr <= 0.05``), or a view pixel no surface covers.
     """
-    U, V = (int(g) for g in grid)
-    H, W = (int(s) for s in size)
-    if not surfaces:
-        raise ValueError("a scene needs at least one surface")
-    if U < 3 or V < 3:
-        raise ValueError(f"grid must be at least (3, 3); got {grid}")
-    if H < 2 or W < 2:
-        raise ValueError(f"size must be at least (2, 2); got {size}")
+    U, V, H, W = _check_scene(surfaces, grid, size)
     if supersample < 1:
         raise ValueError(f"supersample must be >= 1; got {supersample}")
     max_dr, max_dc = max(U // 2, U - 1 - U // 2), max(V // 2, V - 1 - V // 2)
