@@ -1,4 +1,4 @@
-"""Depth accuracy and view-consistency metrics (SPEC §7)."""
+"""Depth accuracy, view-consistency and light-field superpixel metrics (SPEC §3, §7)."""
 
 from ._consistency import view_consistency as view_consistency
 from ._depth import BADPIX_THRESHOLDS as BADPIX_THRESHOLDS
@@ -15,3 +15,11 @@ from ._depth import mse_x100 as mse_x100
 from ._depth import q25_hci_x100 as q25_hci_x100
 from ._depth import q25_x100 as q25_x100
 from ._depth import read_region_masks as read_region_masks
+from ._superpixel import achievable_segmentation_accuracy as achievable_segmentation_accuracy
+from ._superpixel import boundary_mask as boundary_mask
+from ._superpixel import boundary_recall as boundary_recall
+from ._superpixel import compactness as compactness
+from ._superpixel import labels_per_pixel as labels_per_pixel
+from ._superpixel import self_similarity_error as self_similarity_error
+from ._superpixel import superpixel_metrics as superpixel_metrics
+from ._superpixel import undersegmentation_error as undersegmentation_error

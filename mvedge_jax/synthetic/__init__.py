@@ -1,10 +1,14 @@
-"""Procedural light fields with exact ground-truth disparity for every view."""
+"""Procedural light fields with exact ground-truth disparity and object IDs for every view."""
 
 from ._scene import DISC as DISC
 from ._scene import RECT as RECT
 from ._scene import WHOLE as WHOLE
 from ._scene import Surface as Surface
 from ._scene import default_light_field as default_light_field
+from ._scene import default_surfaces as default_surfaces
 from ._scene import make_scene as make_scene
+from ._scene import make_scene_with_objects as make_scene_with_objects
+from ._scene import render_object_ids as render_object_ids
 from ._scene import render_surfaces as render_surfaces
+from ._scene import scene_surfaces as scene_surfaces
 from ._variants import VARIANTS, variant_scene, variant_scenes  # noqa: F401

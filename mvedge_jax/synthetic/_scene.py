@@ -209,6 +209,58 @@ def _render(p, offsets, *, H: int, W: int, ss: int, chunk_pixels: int = 1 << 22)
     return jnp.concatenate(rgbs)[:n], jnp.concatenate(gts)[:n]
 
 
+def _check_scene(surfaces, grid, size) -> tuple[int, int, int, int]:
+    """``(U, V, H, W)`` of a scene to render; ValueError on an empty scene, bad grid or size."""
+    U, V = (int(g) for g in grid)
+    H, W = (int(s) for s in size)
+    if not surfaces:
+        raise ValueError("a scene needs at least one surface")
+    if U < 3 or V < 3:
+        raise ValueError(f"grid must be at least (3, 3); got {grid}")
+    if H < 2 or W < 2:
+        raise ValueError(f"size must be at least (2, 2); got {size}")
+    return U, V, H, W
+
+
+@functools.partial(jax.jit, static_argnames=("H", "W"))
+def _render_ids(p, offsets, *, H: int, W: int):
+    """Index of the visible surface at the pixel centres of the views at ``offsets (N, 2)``."""
+    cy, cx = (H - 1) / 2.0, (W - 1) / 2.0
+    ys = jnp.broadcast_to(jnp.arange(H, dtype=jnp.float32)[:, None] - cy, (H, W))
+    xs = jnp.broadcast_to(jnp.arange(W, dtype=jnp.float32)[None, :] - cx, (H, W))
+    return jax.vmap(lambda o: _geometry(p, xs, ys, o[0], o[1])[0])(offsets)
+
+
+def render_object_ids(
+    surfaces: list[Surface],
+    *,
+    grid: tuple[int, int] = (9, 9),
+    size: tuple[int, int] = (128, 128),
+) -> jax.Array:
+    """Per-view object-ID ground truth: the index of the surface visible at each pixel centre.
+
+    The same z-test as the ground-truth disparity of `render_surfaces` (the nearest surface
+    whose support contains its point wins), so IDs and ``gt_disparity`` agree pixel for pixel.
+    Each surface is one object (index into ``surfaces``).
+
+    Args:
+        surfaces: the scene, as passed to `render_surfaces`.
+        grid: ``(U, V)`` angular resolution (each >= 3).
+        size: ``(H, W)`` view size in pixels.
+
+    Returns:
+        ``(U, V, H, W)`` int32 object IDs in ``[0, len(surfaces))``.
+
+    Raises:
+        ValueError: on an empty scene, a bad grid or size.
+    """
+    U, V, H, W = _check_scene(surfaces, grid, size)
+    dr, dc = view_offsets(U, V)
+    offsets = jnp.stack([dr.ravel(), dc.ravel()], axis=-1)
+    ids = _render_ids(_pack(surfaces), offsets, H=H, W=W)
+    return ids.reshape(U, V, H, W).astype(jnp.int32)
+
+
 def render_surfaces(
     surfaces: list[Surface],
     *,
@@ -237,14 +289,7 @@ def render_surfaces(
         ValueError: on an empty scene, bad grid/size/supersample, a surface folding over in
             some view (``1 - b dc - c dr <= 0.05``), or a view pixel no surface covers.
     """
-    U, V = (int(g) for g in grid)
-    H, W = (int(s) for s in size)
-    if not surfaces:
-        raise ValueError("a scene needs at least one surface")
-    if U < 3 or V < 3:
-        raise ValueError(f"grid must be at least (3, 3); got {grid}")
-    if H < 2 or W < 2:
-        raise ValueError(f"size must be at least (2, 2); got {size}")
+    U, V, H, W = _check_scene(surfaces, grid, size)
     if supersample < 1:
         raise ValueError(f"supersample must be >= 1; got {supersample}")
     max_dr, max_dc = max(U // 2, U - 1 - U // 2), max(V // 2, V - 1 - V // 2)
@@ -322,40 +367,21 @@ def _fit_plane(a, b, c, box, lo, hi):
     return a, b, c
 
 
-def make_scene(
+def scene_surfaces(
     seed: int = 0,
     *,
     grid: tuple[int, int] = (9, 9),
     size: tuple[int, int] = (128, 128),
     disparity_range: tuple[float, float] = (-2.0, 2.0),
     n_objects: int = 5,
-    supersample: int = 2,
-) -> LightField:
-    """A random scene of textured planes and discs at several depths, with exact GT.
+) -> list[Surface]:
+    """The surfaces of `make_scene` (same arguments, same random layout), without rendering.
 
-    Layout: a slightly slanted textured background at the far end of the range, a slanted
-    "floor" rectangle over the lower part of the image (disparity growing downwards), and
-    ``n_objects`` rectangles (rotated, some slanted) and discs at random positions and depths
-    in front, which occlude each other and the background. Every surface has smooth colour
-    noise and hard-edged stripes or a checkerboard, so EPIs have edges at texture boundaries
-    and at occlusion boundaries. All disparities of every view lie within
-    ``disparity_range``. Deterministic for a given ``seed`` and arguments.
-
-    Args:
-        seed: random seed (numpy ``default_rng``).
-        grid: ``(U, V)`` angular resolution.
-        size: ``(H, W)`` view size in pixels.
-        disparity_range: ``(d_min, d_max)`` in pixels per view step, ``d_min < d_max``;
-            stored as the light field's ``disparity_range``.
-        n_objects: number of foreground rectangles/discs (>= 0).
-        supersample: colour samples per pixel along each axis.
-
-    Returns:
-        A `LightField` named ``"synthetic-<seed>"`` with ``gt_disparity`` and ``gt_mask``
-        ``(U, V, H, W)`` for every view.
+    Use it with `render_object_ids` for per-view object-ID ground truth, or see
+    `make_scene_with_objects`.
 
     Raises:
-        ValueError: on ``d_min >= d_max``, ``n_objects < 0`` or bad grid/size/supersample.
+        ValueError: on ``d_min >= d_max`` or ``n_objects < 0``.
     """
     lo, hi = (float(v) for v in disparity_range)
     if not lo < hi:
@@ -431,30 +457,93 @@ def make_scene(
                 **_random_texture(rng),
             )
         )
+    return surfaces
+
+
+def make_scene(
+    seed: int = 0,
+    *,
+    grid: tuple[int, int] = (9, 9),
+    size: tuple[int, int] = (128, 128),
+    disparity_range: tuple[float, float] = (-2.0, 2.0),
+    n_objects: int = 5,
+    supersample: int = 2,
+) -> LightField:
+    """A random scene of textured planes and discs at several depths, with exact GT.
+
+    Layout: a slightly slanted textured background at the far end of the range, a slanted
+    "floor" rectangle over the lower part of the image (disparity growing downwards), and
+    ``n_objects`` rectangles (rotated, some slanted) and discs at random positions and depths
+    in front, which occlude each other and the background. Every surface has smooth colour
+    noise and hard-edged stripes or a checkerboard, so EPIs have edges at texture boundaries
+    and at occlusion boundaries. All disparities of every view lie within
+    ``disparity_range``. Deterministic for a given ``seed`` and arguments.
+
+    Args:
+        seed: random seed (numpy ``default_rng``).
+        grid: ``(U, V)`` angular resolution.
+        size: ``(H, W)`` view size in pixels.
+        disparity_range: ``(d_min, d_max)`` in pixels per view step, ``d_min < d_max``;
+            stored as the light field's ``disparity_range``.
+        n_objects: number of foreground rectangles/discs (>= 0).
+        supersample: colour samples per pixel along each axis.
+
+    Returns:
+        A `LightField` named ``"synthetic-<seed>"`` with ``gt_disparity`` and ``gt_mask``
+        ``(U, V, H, W)`` for every view.
+
+    Raises:
+        ValueError: on ``d_min >= d_max``, ``n_objects < 0`` or bad grid/size/supersample.
+    """
+    lo, hi = (float(v) for v in disparity_range)
+    surfaces = scene_surfaces(
+        seed, grid=grid, size=size, disparity_range=disparity_range, n_objects=n_objects
+    )
     return render_surfaces(
         surfaces,
-        grid=(U, V),
-        size=(H, W),
+        grid=tuple(int(g) for g in grid),
+        size=tuple(int(v) for v in size),
         supersample=supersample,
         name=f"synthetic-{seed}",
         disparity_range=(lo, hi),
     )
 
 
-@functools.lru_cache(maxsize=2)
-def default_light_field() -> LightField:
-    """The embedded default input of ``mvedge demo``: a 9×9×160×160 synthetic scene.
-
-    A far textured wall, a slanted checkered floor, a striped board at mid depth, a slanted
-    panel, a disc and a thin rotated bar in front (several mutual occlusions, thin structure,
-    fronto-parallel and slanted surfaces); disparities within [-1.5, 1.5] pixels per view
-    step; exact GT for every view. Deterministic; cached after the first call.
+def make_scene_with_objects(
+    seed: int = 0,
+    *,
+    grid: tuple[int, int] = (9, 9),
+    size: tuple[int, int] = (128, 128),
+    disparity_range: tuple[float, float] = (-2.0, 2.0),
+    n_objects: int = 5,
+    supersample: int = 2,
+) -> tuple[LightField, jax.Array]:
+    """`make_scene` plus per-view object-ID ground truth (one ID per surface).
 
     Returns:
-        A `LightField` named ``"synthetic-default"`` with ``disparity_range = (-1.5, 1.5)``.
+        ``(light_field, object_ids)``: the same `LightField` as `make_scene` with the same
+        arguments, and ``(U, V, H, W)`` int32 IDs from `render_object_ids`.
+
+    Raises:
+        ValueError: as `make_scene`.
     """
+    lf = make_scene(
+        seed,
+        grid=grid,
+        size=size,
+        disparity_range=disparity_range,
+        n_objects=n_objects,
+        supersample=supersample,
+    )
+    surfaces = scene_surfaces(
+        seed, grid=grid, size=size, disparity_range=disparity_range, n_objects=n_objects
+    )
+    return lf, render_object_ids(surfaces, grid=lf.grid, size=lf.size)
+
+
+def default_surfaces() -> list[Surface]:
+    """The surfaces of `default_light_field` (for `render_object_ids`); deterministic."""
     rng = np.random.default_rng(20221)
-    H = W = 160
     tex = lambda base: _random_texture(rng, base)
     surfaces = [
         # far wall, slightly slanted, thin stripes
@@ -502,8 +591,24 @@ def default_light_field() -> LightField:
             **tex((0.25, 0.30, 0.70)),
         ),
     ]
+    return surfaces
+
+
+@functools.lru_cache(maxsize=2)
+def default_light_field() -> LightField:
+    """The embedded default input of ``mvedge demo``: a 9×9×160×160 synthetic scene.
+
+    A far textured wall, a slanted checkered floor, a striped board at mid depth, a slanted
+    panel, a disc and a thin rotated bar in front (several mutual occlusions, thin structure,
+    fronto-parallel and slanted surfaces); disparities within [-1.5, 1.5] pixels per view
+    step; exact GT for every view. Deterministic; cached after the first call.
+
+    Returns:
+        A `LightField` named ``"synthetic-default"`` with ``disparity_range = (-1.5, 1.5)``.
+    """
+    H = W = 160
     return render_surfaces(
-        surfaces,
+        default_surfaces(),
         grid=(9, 9),
         size=(H, W),
         supersample=3,

@@ -1,0 +1,144 @@
+"""`SuperpixelConfig`: every option of the view-consistent 4D superpixels (thesis Ch. 5)."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from ..edges import EdgeConfig
+from ..surface import SurfaceConfig
+
+_f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+
+
+class SuperpixelConfig(eqx.Module):
+    """Configuration of `superpixels` and `kmeans_superpixels`.
+
+    Static values change shapes, the number of clusters or host-side decisions (changing them
+    recompiles); the label-propagation weights are float32 array leaves.
+
+    Attributes (static):
+        size: mean superpixel side in pixels; the number of superpixels is
+            ``round(H * W / size²)`` (thesis: sizes 15–40).
+        line_capacity: EPI lines kept per EPI (the most confident; the rest are counted as
+            dropped).
+        segment_capacity: EPI segments kept per EPI; ``None``: ``line_capacity + 2 +
+            2 * ceil(width / split_width)``.
+        merge_distance: neighbouring lines of one EPI closer than this (pixels, centre row) and
+            with disparities within ``merge_disparity`` are one line (the detector reports an
+            edge on each of the adjacent pixels it straddles).
+        merge_disparity: see ``merge_distance`` (pixels per view step).
+        omega_d: ω_d of eq 4.7, the weight of the disparity difference against the spatial
+            distance of two lines in the matching weight.
+        occlusion_tol: two lines cross (an occlusion) only if their disparities differ by more
+            than this (pixels per view step).
+        side_min: a surface vector decides the side of a line in an EPI only if its component
+            along the EPI's spatial axis is at least this (unit vector); otherwise the side is
+            unknown and both sides of the line stay open.
+        split_width: segments wider than this (pixels, centre view) are split into equal parts
+            by new lines with the segment's disparity (thesis: 15).
+        weight_xy: k-means weight of the x and y features (thesis 1).
+        weight_d: k-means weight of the disparity normalised to [0, 1] over the scene's range
+            (thesis 120).
+        weight_lab: k-means weight of L*, a*, b* (thesis 3), applied to ``lab_scale * LAB``.
+        lab_scale: unit of the colour features: CIELAB is multiplied by this before
+            ``weight_lab`` (1: L* in [0, 100]).
+        kmeans_iters: Lloyd iterations of the clustering (scikit-learn ``max_iter``).
+        keep_disagreeing: where the horizontal and vertical segmentations disagree, keep the
+            nearer one's label (ties: the horizontal) instead of unlabelling the pixel (thesis:
+            unlabel, then propagate; keeping is more view-consistent, because each
+            segmentation alone is consistent across views).
+        propagation_radius: label propagation (eq 5.1) looks for labelled pixels within this
+            chessboard radius (pixels).
+        propagation_passes: passes of the propagation; each fills unlabelled pixels within
+            ``propagation_radius`` of a labelled one.
+        edges: configuration of `detect_edges` when `superpixels` detects the edges itself.
+        surface: configuration of `surface_vectors` when `superpixels` computes them.
+
+    Attributes (array leaves):
+        w_colour: ω_c of eq 5.1 (thesis 1), on squared CIELAB differences (L* in [0, 100]).
+        w_spatial: ω_s of eq 5.1 (thesis 1), on squared pixel distances.
+        w_photo: ω_d of eq 5.1 (thesis 1e-5), on the summed absolute CIELAB difference to the
+            four end views of the cross-hair at the candidate's disparity.
+
+    Raises:
+        ValueError: on construction, for out-of-range values.
+
+    References:
+        Thesis Sec. 4.2.1 (Alg. 2, eq 4.7), Sec. 5.1.1 (clustering weights, eq 5.1).
+    """
+
+    size: float = eqx.field(static=True, default=20.0)
+    line_capacity: int = eqx.field(static=True, default=192)
+    segment_capacity: int | None = eqx.field(static=True, default=None)
+    merge_distance: float = eqx.field(static=True, default=1.5)
+    merge_disparity: float = eqx.field(static=True, default=0.25)
+    omega_d: float = eqx.field(static=True, default=0.9)
+    occlusion_tol: float = eqx.field(static=True, default=0.1)
+    side_min: float = eqx.field(static=True, default=0.3)
+    split_width: float = eqx.field(static=True, default=15.0)
+    weight_xy: float = eqx.field(static=True, default=1.0)
+    weight_d: float = eqx.field(static=True, default=120.0)
+    weight_lab: float = eqx.field(static=True, default=3.0)
+    lab_scale: float = eqx.field(static=True, default=0.2)
+    kmeans_iters: int = eqx.field(static=True, default=20)
+    keep_disagreeing: bool = eqx.field(static=True, default=False)
+    propagation_radius: int = eqx.field(static=True, default=2)
+    propagation_passes: int = eqx.field(static=True, default=2)
+    w_colour: Array = eqx.field(converter=_f32, default=1.0)
+    w_spatial: Array = eqx.field(converter=_f32, default=1.0)
+    w_photo: Array = eqx.field(converter=_f32, default=1e-5)
+    edges: EdgeConfig = EdgeConfig()
+    surface: SurfaceConfig = SurfaceConfig()
+
+    def __check_init__(self):
+        if not (math.isfinite(self.size) and self.size >= 2):
+            raise ValueError(f"SuperpixelConfig.size must be >= 2 pixels; got {self.size}")
+        for name in ("line_capacity", "kmeans_iters", "propagation_radius"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"SuperpixelConfig.{name} must be >= 1; got {getattr(self, name)}")
+        if self.propagation_passes < 0:
+            raise ValueError(
+                f"SuperpixelConfig.propagation_passes must be >= 0; got {self.propagation_passes}"
+            )
+        if self.segment_capacity is not None and self.segment_capacity < 2:
+            raise ValueError(
+                f"SuperpixelConfig.segment_capacity must be >= 2; got {self.segment_capacity}"
+            )
+        if not 0.0 <= self.omega_d <= 1.0:
+            raise ValueError(f"SuperpixelConfig.omega_d must be in [0, 1]; got {self.omega_d}")
+        if not self.split_width >= 2:
+            raise ValueError(f"SuperpixelConfig.split_width must be >= 2; got {self.split_width}")
+        for name in (
+            "merge_distance",
+            "merge_disparity",
+            "occlusion_tol",
+            "side_min",
+            "weight_xy",
+            "weight_d",
+            "weight_lab",
+            "lab_scale",
+        ):
+            v = float(getattr(self, name))
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"SuperpixelConfig.{name} must be finite and >= 0; got {v}")
+        for name in ("w_colour", "w_spatial", "w_photo"):
+            try:
+                v = float(getattr(self, name))
+            except Exception:  # traced
+                continue
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"SuperpixelConfig.{name} must be finite and >= 0; got {v}")
+
+    def n_superpixels(self, height: int, width: int) -> int:
+        """Number of clusters for ``height × width`` views: ``max(1, round(H W / size²))``."""
+        return max(1, round(height * width / (self.size * self.size)))
+
+    def segments_per_epi(self, width: int) -> int:
+        """The segment capacity per EPI for an EPI ``width`` pixels wide."""
+        if self.segment_capacity is not None:
+            return int(self.segment_capacity)
+        return int(self.line_capacity + 2 + 2 * math.ceil(width / self.split_width))

@@ -1,0 +1,448 @@
+"""View-consistent 4D light-field superpixels (thesis Ch. 5) and the k-means baseline."""
+
+from __future__ import annotations
+
+import functools
+import time
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float, Int
+from scipy.spatial import cKDTree
+from sklearn.cluster import KMeans
+
+from ..edges import HORIZONTAL, VERTICAL, EdgeSet, detect_edges
+from ..lightfield import LightField, rgb_to_lab
+from ..surface import surface_vectors
+from ._config import SuperpixelConfig
+from ._label import forward_labels, nearest_fill, propagate_labels
+from ._segment import EPISegments, render_segments, resolve_unknown, segment_epis
+
+
+class SuperpixelResult(eqx.Module):
+    """Output of `superpixels` and `kmeans_superpixels`.
+
+    Attributes:
+        labels: ``(U, V, H, W)`` int32 superpixel label of every pixel of every view (the
+            same label means the same superpixel in every view).
+        disparity: ``(U, V, H, W)`` float32 piece-wise constant disparity of every pixel
+            (pixels per view step).
+        n_superpixels: number of k-means clusters (seeds on a regular grid of about
+            ``H W / size²`` cells).
+        consistent_fraction: fraction of all light-field pixels whose label came from the
+            agreeing horizontal and vertical segmentations (before propagation; 1 minus the
+            projection holes for the baseline).
+        seconds: wall seconds per stage (after compilation of the jitted stages is included
+            on a first call; see ``experiments/superpixels_ch5.py`` for timings).
+    """
+
+    labels: Int[Array, "U V H W"]
+    disparity: Float[Array, "U V H W"]
+    n_superpixels: int = eqx.field(static=True)
+    consistent_fraction: float = eqx.field(static=True)
+    seconds: dict = eqx.field(static=True)
+
+
+def _check_lf(lf: LightField) -> None:
+    U, V = lf.grid
+    if U < 3 or V < 3:
+        raise ValueError(f"superpixels need at least 3x3 views; got a {U}x{V} grid")
+    if not bool(jnp.isfinite(lf.views).all()):
+        raise ValueError(f"light field {lf.name!r} contains NaN or Inf pixel values")
+    if not bool(
+        np.asarray(lf.view_mask)[U // 2].all() and np.asarray(lf.view_mask)[:, V // 2].all()
+    ):
+        raise ValueError("superpixels need the complete central row and column of views")
+
+
+@jax.jit
+def _segment_colours(epi_lab, labels, n_segments_dummy):
+    """Mean CIELAB and pixel count per segment: ``(E, S, 3)``, ``(E, S)``."""
+    E, S = n_segments_dummy.shape
+    ids = jnp.where(labels >= 0, jnp.arange(E)[:, None, None] * S + labels, E * S).ravel()
+    cnt = jax.ops.segment_sum(jnp.ones_like(ids, jnp.float32), ids, E * S + 1)[:-1]
+    tot = jax.ops.segment_sum(epi_lab.reshape(-1, 3), ids, E * S + 1)[:-1]
+    mean = tot / jnp.maximum(cnt, 1.0)[:, None]
+    return mean.reshape(E, S, 3), cnt.reshape(E, S)
+
+
+@jax.jit
+def _known_map(known, centre_labels):
+    """``(E, w)`` bool: the EPI centre-row pixel's segment has a known disparity."""
+    k = jnp.take_along_axis(known, jnp.maximum(centre_labels, 0), axis=1)
+    return (centre_labels >= 0) & k
+
+
+@jax.jit
+def _cluster_maps(table, seg_labels):
+    """EPI segment labels ``(E, n, w)`` → cluster labels via ``table (E, S)`` (-1 stays)."""
+    E = seg_labels.shape[0]
+    flat = jnp.maximum(seg_labels, 0).reshape(E, -1)
+    out = jnp.take_along_axis(table, flat, axis=1).reshape(seg_labels.shape)
+    return jnp.where(seg_labels >= 0, out, -1)
+
+
+def _uniform_seeds(H: int, W: int, k: int) -> np.ndarray:
+    """``(k', 2)`` (x, y) seeds on a regular grid of about ``k`` cells (SLIC's seeding)."""
+    step = np.sqrt(H * W / k)
+    ny, nx = max(1, round(H / step)), max(1, round(W / step))
+    ys = (np.arange(ny) + 0.5) * H / ny - 0.5
+    xs = (np.arange(nx) + 0.5) * W / nx - 0.5
+    gy, gx = np.meshgrid(ys, xs, indexing="ij")
+    return np.stack([gx.ravel(), gy.ravel()], -1)
+
+
+def _kmeans(
+    xy: np.ndarray, feats: np.ndarray, H: int, W: int, k: int, iters: int
+) -> tuple[np.ndarray, int]:
+    """scikit-learn k-means of weighted ``feats (N, F)`` from about ``k`` uniform seeds (each
+    takes the features of the point nearest to it in the image; duplicates merged); returns
+    the labels and the number of clusters."""
+    seeds = _uniform_seeds(H, W, k)
+    _, nearest = cKDTree(xy).query(seeds)
+    init = np.unique(feats[nearest], axis=0)
+    init = init[: feats.shape[0]]
+    km = KMeans(n_clusters=init.shape[0], init=init, n_init=1, max_iter=iters, algorithm="lloyd")
+    return km.fit_predict(feats).astype(np.int32), int(init.shape[0])
+
+
+def _disparity_scale(lf: LightField, d: np.ndarray) -> tuple[float, float]:
+    if lf.disparity_range is not None:
+        lo, hi = lf.disparity_range
+    elif d.size:
+        lo, hi = float(np.percentile(d, 1)), float(np.percentile(d, 99))
+    else:
+        lo, hi = 0.0, 1.0
+    return float(lo), float(max(hi - lo, 1e-3))
+
+
+def _features(x, y, d, lab, lo, span, config: SuperpixelConfig) -> np.ndarray:
+    dn = (np.asarray(d, np.float64) - lo) / span
+    return np.concatenate(
+        [
+            config.weight_xy * np.stack([x, y], -1),
+            config.weight_d * dn[:, None],
+            config.weight_lab * config.lab_scale * np.asarray(lab, np.float64),
+        ],
+        axis=1,
+    )
+
+
+def _project_both(row_l, row_d, col_l, col_d):
+    """Every view's labels from the centre row of views (view ``(r_c, c)`` shifted by
+    ``dr = r - r_c``) and from the centre column (view ``(r, c_c)`` shifted by ``dc``)."""
+    V, U = row_l.shape[0], col_l.shape[0]
+    rs = (jnp.arange(U) - U // 2).astype(jnp.float32)
+    cs = (jnp.arange(V) - V // 2).astype(jnp.float32)
+    lh, dh = jax.vmap(
+        lambda dr: jax.vmap(lambda lb, d: forward_labels(lb, d, dr, 0.0))(row_l, row_d)
+    )(rs)
+    lv, dv = jax.vmap(lambda lb, d: jax.vmap(lambda dc: forward_labels(lb, d, 0.0, dc))(cs))(
+        col_l, col_d
+    )
+    return lh, dh, lv, dv  # each (U, V, H, W)
+
+
+@functools.partial(jax.jit, static_argnames=("keep",))
+def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
+    """Labels of every view from both segmentations, kept where they agree (with ``keep``,
+    a disagreeing pixel keeps the nearer segmentation's label, the horizontal on ties)."""
+    lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
+    agree = (lh >= 0) & (lh == lv)
+    lab = jnp.where(agree, lh, -1)
+    d = jnp.where(agree, 0.5 * (dh + dv), 0.0)
+    if keep:
+        use_v = (lv >= 0) & ((lh < 0) | (dv > dh))
+        lab = jnp.where(agree, lab, jnp.where(use_v, lv, lh))
+        d = jnp.where(agree, d, jnp.where(use_v, dv, dh))
+    return lab, d
+
+
+@jax.jit
+def _fill_from_cross(labels, disp, row_l, row_d, col_l, col_d):
+    """Fill unlabelled pixels of every view from the (propagated) cross-hair views."""
+    lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
+    take_h = (labels < 0) & (lh >= 0)
+    labels = jnp.where(take_h, lh, labels)
+    disp = jnp.where(take_h, dh, disp)
+    take_v = (labels < 0) & (lv >= 0)
+    return jnp.where(take_v, lv, labels), jnp.where(take_v, dv, disp)
+
+
+def _cross_offsets(U: int, V: int) -> np.ndarray:
+    rc, cc = U // 2, V // 2
+    row = [(0.0, float(c - cc)) for c in range(V)]
+    col = [(float(r - rc), 0.0) for r in range(U)]
+    return np.asarray(row + col, np.float32)
+
+
+def _ends(lab_views: Array, U: int, V: int) -> tuple[Array, Array]:
+    """CIELAB and offsets of the four end views of the cross-hair (eq 5.1's comparison)."""
+    rc, cc = U // 2, V // 2
+    idx = [(rc, 0), (rc, V - 1), (0, cc), (U - 1, cc)]
+    lab = jnp.stack([lab_views[r, c] for r, c in idx])
+    off = jnp.asarray([(r - rc, c - cc) for r, c in idx], jnp.float32)
+    return lab, off
+
+
+def superpixels(
+    lf: LightField,
+    config: SuperpixelConfig = SuperpixelConfig(),
+    *,
+    edges: EdgeSet | None = None,
+    surface_offset: Float[ArrayLike, "N 2"] | None = None,
+) -> SuperpixelResult:
+    """View-consistent superpixels of every view of a light field (thesis Ch. 5).
+
+    1. Occlusion-aware EPI segmentation (Sec. 4.2.1): the lines of every horizontal EPI (centre
+       row of views) and vertical EPI (centre column) are paired into depth-ordered segments
+       (`segment_epis`, Alg. 2) and rendered into EPI label maps (`render_segments`); a segment
+       whose bounding lines both face away from it (a surface seen between two nearer ones)
+       takes the other direction's disparity on the centre view (`resolve_unknown`).
+    2. Clustering (Sec. 5.1.1): every segment with at least one visible pixel becomes a point
+       ``(x, y, d, L*, a*, b*)`` (x, y: its centre on the centre view; d: its disparity,
+       normalised to [0, 1] over the scene's range; colour: the mean CIELAB of its EPI
+       pixels), weighted by ``weight_xy, weight_xy, weight_d, weight_lab · lab_scale``;
+       scikit-learn k-means from ``round(H W / size²)`` uniform seeds (each seed takes the
+       features of the segment nearest to it in the image).
+    3. Every view ``(r, c)`` receives the cluster labels of the horizontal segmentation of view
+       ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
+       shifted horizontally, by the segments' disparities (z-buffer: nearer wins); pixels where
+       the two disagree (or that neither reaches) are unlabelled (with
+       ``config.keep_disagreeing`` a disagreeing pixel keeps the nearer one's label instead).
+    4. Label propagation (eq 5.1) on the cross-hair views, projection of those labels into the
+       other views' unlabelled pixels, and nearest-labelled-pixel fill for the rest: every
+       pixel of every view gets a label and a disparity.
+
+    The EPI pairing and k-means run on the host (SciPy / scikit-learn); rendering, projection
+    and propagation are jitted and vectorised over EPIs and views.
+
+    Args:
+        lf: the light field (at least 3x3 views, complete cross-hair).
+        config: parameters.
+        edges: a multi-view edge set of ``lf`` (`detect_edges`); detected with
+            ``config.edges`` when omitted.
+        surface_offset: ``(N, 2)`` surface vectors of ``edges`` (`surface_vectors` ``.offset``);
+            computed with ``config.surface`` when omitted.
+
+    Returns:
+        A `SuperpixelResult` with ``labels`` and ``disparity`` of shape ``(U, V, H, W)``.
+
+    Raises:
+        ValueError: fewer than 3x3 views, an incomplete cross-hair, NaN/Inf pixels,
+            ``surface_offset`` of the wrong shape, or no EPI segment at all.
+
+    References:
+        Thesis Sec. 4.2.1 (Alg. 2, eq 4.7), Sec. 5.1 (clustering, eq 5.1); Khan et al.,
+        "View-consistent 4D light field superpixel segmentation", ICCV 2019.
+    """
+    _check_lf(lf)
+    U, V = lf.grid
+    H, W = lf.size
+    rc, cc = U // 2, V // 2
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    if edges is None:
+        edges = detect_edges(lf, config.edges)
+        jax.block_until_ready(edges)
+        seconds["edges"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+    if surface_offset is None:
+        surface_offset = surface_vectors(edges, lf.centre_view, config.surface).offset
+        surface_offset = jax.block_until_ready(surface_offset)
+        seconds["surface"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+    seg_h = segment_epis(edges, surface_offset, HORIZONTAL, V, H, W, config)
+    seg_v = segment_epis(edges, surface_offset, VERTICAL, U, W, H, config)
+    seconds["pairing"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)  # (H, V, W)
+    lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)  # (W, U, H)
+    # Segments behind both their lines take the other direction's centre-view disparity.
+    kh = _known_map(seg_h.known, lab_h[:, V // 2])  # (H, W)
+    kv = _known_map(seg_v.known, lab_v[:, U // 2])  # (W, H)
+    lines_d = np.asarray(edges.disparity)[np.asarray(edges.valid)]
+    # The deepest surface seen: the 2nd percentile of the line disparities.
+    floor = (
+        float(np.percentile(lines_d, 2))
+        if lines_d.size
+        else lf.disparity_range[0]
+        if lf.disparity_range is not None
+        else 0.0
+    )
+    seg_h, seg_v = (
+        resolve_unknown(seg_h, lab_h, disp_v[:, U // 2].T, kv.T, floor),
+        resolve_unknown(seg_v, lab_v, disp_h[:, V // 2].T, kh.T, floor),
+    )
+    lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)
+    lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)
+    lab_views = rgb_to_lab(lf.views)
+    epi_h = jnp.transpose(lab_views[rc], (1, 0, 2, 3))  # (H, V, W, 3)
+    epi_v = jnp.transpose(lab_views[:, cc], (2, 0, 1, 3))  # (W, U, H, 3)
+    col_h, cnt_h = _segment_colours(epi_h, lab_h, seg_h.disparity)
+    col_v, cnt_v = _segment_colours(epi_v, lab_v, seg_v.disparity)
+    jax.block_until_ready((col_h, col_v))
+    seconds["render"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    feats, xys, where = [], [], []
+    for seg, col, cnt, direction in ((seg_h, col_h, cnt_h, 0), (seg_v, col_v, cnt_v, 1)):
+        ok = np.asarray(seg.valid) & (np.asarray(cnt) > 0)
+        e, s = np.nonzero(ok)
+        mid = 0.5 * (np.asarray(seg.left_pos)[e, s] + np.asarray(seg.right_pos)[e, s])
+        x, y = (mid, e.astype(np.float64)) if direction == 0 else (e.astype(np.float64), mid)
+        x = np.clip(x, 0, W - 1)
+        y = np.clip(y, 0, H - 1)
+        xys.append(np.stack([x, y], -1))
+        feats.append((x, y, np.asarray(seg.disparity)[e, s], np.asarray(col)[e, s]))
+        where.append((e, s))
+    xy = np.concatenate(xys)
+    if xy.shape[0] == 0:
+        raise ValueError(f"no EPI segment found in light field {lf.name!r}")
+    d_all = np.concatenate([f[2] for f in feats])
+    lo, span = _disparity_scale(lf, d_all)
+    F = np.concatenate([_features(*f, lo, span, config) for f in feats])
+    k = min(config.n_superpixels(H, W), xy.shape[0])
+    cluster, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
+    n_h = where[0][0].size
+    tables = []
+    for (e, s), seg, lbl in zip(where, (seg_h, seg_v), (cluster[:n_h], cluster[n_h:]), strict=True):
+        t = np.full(seg.valid.shape, -1, np.int32)
+        t[e, s] = lbl
+        tables.append(jnp.asarray(t))
+    seconds["cluster"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    th, tv = tables
+    cl_h = _cluster_maps(th, lab_h)
+    cl_v = _cluster_maps(tv, lab_v)
+    row_l = jnp.transpose(cl_h, (1, 0, 2))  # (V, H, W): views (rc, c)
+    row_d = jnp.transpose(disp_h, (1, 0, 2))
+    col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
+    col_d = jnp.transpose(disp_v, (1, 2, 0))
+    consistent = float(jnp.mean(_project_agree(row_l, row_d, col_l, col_d)[0] >= 0))
+    labels, disp = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
+    # Propagation on the cross-hair (eq 5.1), then into the other views, then nearest fill.
+    cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
+    cross_d = jnp.concatenate([disp[rc], disp[:, cc]])
+    cross_lab = jnp.concatenate([lab_views[rc], lab_views[:, cc]])
+    cmp_lab, cmp_off = _ends(lab_views, U, V)
+    cross_l, cross_d = propagate_labels(
+        cross_lab,
+        cross_l,
+        cross_d,
+        jnp.asarray(_cross_offsets(U, V)),
+        cmp_lab,
+        cmp_off,
+        config.w_colour,
+        config.w_spatial,
+        config.w_photo,
+        radius=config.propagation_radius,
+        passes=config.propagation_passes,
+    )
+    labels, disp = _fill_from_cross(
+        labels, disp, cross_l[:V], cross_d[:V], cross_l[V:], cross_d[V:]
+    )
+    labels = labels.at[rc].set(cross_l[:V]).at[:, cc].set(cross_l[V:])
+    disp = disp.at[rc].set(cross_d[:V]).at[:, cc].set(cross_d[V:])
+    fl, fd = nearest_fill(labels.reshape(U * V, H, W), disp.reshape(U * V, H, W))
+    fl, fd = jax.block_until_ready((fl.reshape(U, V, H, W), fd.reshape(U, V, H, W)))
+    seconds["label"] = time.perf_counter() - t0
+    return SuperpixelResult(
+        labels=fl,
+        disparity=fd,
+        n_superpixels=int(k),
+        consistent_fraction=consistent,
+        seconds=seconds,
+    )
+
+
+@jax.jit
+def _project_centre(centre_l, centre_d, offsets):
+    return jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(offsets)
+
+
+def kmeans_superpixels(
+    lf: LightField,
+    disparity: Float[ArrayLike, "H W"],
+    config: SuperpixelConfig = SuperpixelConfig(),
+) -> SuperpixelResult:
+    """The k-means baseline of thesis Sec. 5.2.2: cluster centre-view pixels, project.
+
+    Every centre-view pixel becomes ``(x, y, d, L*, a*, b*)`` with the same weights as
+    `superpixels` (``d`` normalised over the scene's range); scikit-learn k-means from
+    ``round(H W / size²)`` uniform seeds; the labels are forward-projected into every view
+    with ``disparity`` (z-buffer: nearer wins); the pixels no projection reaches take the
+    label of the cheapest labelled pixel nearby in ``(x, y, L*, a*, b*)`` (eq 5.1 without the
+    photo-consistency term), and the rest the nearest labelled pixel.
+
+    Args:
+        lf: the light field (at least 3x3 views).
+        disparity: ``(H, W)`` centre-view disparity (ours or ground truth), pixels per view
+            step.
+        config: parameters (``size``, the feature weights, ``kmeans_iters``, the propagation
+            settings).
+
+    Returns:
+        A `SuperpixelResult`; ``disparity`` holds the projected centre disparity.
+
+    Raises:
+        ValueError: on a disparity map that is not ``(H, W)`` or not finite, or bad views.
+
+    References:
+        Thesis Sec. 5.2.2 (k-means baseline).
+    """
+    _check_lf(lf)
+    U, V = lf.grid
+    H, W = lf.size
+    d = np.asarray(disparity, np.float32)
+    if d.shape != (H, W):
+        raise ValueError(f"disparity must have shape {(H, W)}; got {d.shape}")
+    if not np.isfinite(d).all():
+        raise ValueError("disparity contains NaN or Inf")
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    lab_views = rgb_to_lab(lf.views)
+    lab_c = np.asarray(lab_views[U // 2, V // 2], np.float64).reshape(-1, 3)
+    gy, gx = np.meshgrid(
+        np.arange(H, dtype=np.float64), np.arange(W, dtype=np.float64), indexing="ij"
+    )
+    lo, span = _disparity_scale(lf, d.ravel())
+    F = _features(gx.ravel(), gy.ravel(), d.ravel(), lab_c, lo, span, config)
+    k = config.n_superpixels(H, W)
+    xy = np.stack([gx.ravel(), gy.ravel()], -1)
+    centre, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
+    centre = jnp.asarray(centre.reshape(H, W))
+    seconds["cluster"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rs, cs = np.meshgrid(np.arange(U) - U // 2, np.arange(V) - V // 2, indexing="ij")
+    offsets = jnp.asarray(np.stack([rs.ravel(), cs.ravel()], -1), jnp.float32)
+    labels, disp = _project_centre(centre, jnp.asarray(d), offsets)
+    consistent = float(jnp.mean(labels >= 0))
+    zeros = jnp.zeros((1, H, W, 3), jnp.float32)
+    labels, disp = propagate_labels(
+        lab_views.reshape(U * V, H, W, 3),
+        labels,
+        disp,
+        offsets,
+        zeros,
+        jnp.zeros((1, 2), jnp.float32),
+        config.w_colour,
+        config.w_spatial,
+        jnp.float32(0.0),
+        radius=config.propagation_radius,
+        passes=config.propagation_passes,
+    )
+    labels, disp = nearest_fill(labels, disp)
+    labels, disp = jax.block_until_ready((labels.reshape(U, V, H, W), disp.reshape(U, V, H, W)))
+    seconds["label"] = time.perf_counter() - t0
+    return SuperpixelResult(
+        labels=labels,
+        disparity=disp,
+        n_superpixels=int(k),
+        consistent_fraction=consistent,
+        seconds=seconds,
+    )
+
+
+__all__ = ["EPISegments", "SuperpixelResult", "kmeans_superpixels", "superpixels"]

@@ -1,0 +1,232 @@
+"""View-consistent 4D superpixels (thesis Ch. 5): EPI pairing, rendering, labelling, driver."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mvedge_jax.edges import EdgeSet
+from mvedge_jax.metrics import (
+    achievable_segmentation_accuracy,
+    labels_per_pixel,
+    self_similarity_error,
+)
+from mvedge_jax.superpixels import (
+    EPISegments,
+    SuperpixelConfig,
+    forward_labels,
+    kmeans_superpixels,
+    match_lines,
+    nearest_fill,
+    propagate_labels,
+    render_segments,
+    superpixels,
+)
+
+CFG = SuperpixelConfig()
+
+
+# ---- config ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        (dict(size=1.0), "size"),
+        (dict(omega_d=1.5), "omega_d"),
+        (dict(split_width=1.0), "split_width"),
+        (dict(line_capacity=0), "line_capacity"),
+        (dict(weight_d=-1.0), "weight_d"),
+        (dict(w_photo=float("nan")), "w_photo"),
+    ],
+)
+def test_config_rejects_bad_values(kw, match):
+    with pytest.raises(ValueError, match=match):
+        SuperpixelConfig(**kw)
+
+
+def test_config_counts():
+    assert SuperpixelConfig(size=20).n_superpixels(512, 512) == round(512 * 512 / 400)
+    assert SuperpixelConfig(line_capacity=10, split_width=16).segments_per_epi(64) == 20
+
+
+# ---- EPI line pairing (Alg. 2) ------------------------------------------------------------
+
+
+def test_match_lines_plain_chain_and_split():
+    # two lines, no occlusion: border-A, A-B (20 px: split in two), B-border (33.5 px: three)
+    rows = match_lines(
+        np.array([10.0, 30.0]), np.zeros(2), np.zeros(2, int), 5, 64, CFG, fallback_disparity=0.0
+    )
+    lp, rp = rows[:, 0], rows[:, 2]
+    order = np.argsort(lp)
+    third = 33.5 / 3
+    np.testing.assert_allclose(lp[order], [-0.5, 10.0, 20.0, 30.0, 30 + third, 30 + 2 * third])
+    np.testing.assert_allclose(rp[order], [10.0, 20.0, 30.0, 30 + third, 30 + 2 * third, 63.5])
+    assert (rp - lp <= CFG.split_width + 1e-9).all()
+
+
+def test_match_lines_occlusion_order():
+    # background B (20) and B' (27, hidden behind the object at the centre row), an object
+    # F1..F2 (25..35) at disparity 2 whose edges cross the background lines, B2 at 50.
+    pos = np.array([20.0, 25.0, 27.0, 35.0, 50.0])
+    disp = np.array([0.0, 2.0, 0.0, 2.0, 0.0])
+    side = np.array([0, 1, 0, -1, 0])  # surface vectors of F1, F2 point into the object
+    rows = match_lines(pos, disp, side, 9, 64, SuperpixelConfig(split_width=64))
+    segs = {(a, b): (d, k) for a, _, b, _, d, k, _, _ in rows}
+    assert segs[(25.0, 35.0)] == (2.0, 1.0)  # the object, between its own two edges
+    assert (20.0, 27.0) in segs and segs[(20.0, 27.0)][0] == 0.0  # background behind it
+    assert not any(b == 25.0 for _, b in segs)  # F1 bounds nothing on its left
+    assert not any(a == 35.0 for a, _ in segs)  # F2 bounds nothing on its right
+
+
+def test_match_lines_unknown_surface_between_two_objects():
+    # two objects' facing-away edges: the gap's surface lies behind both -> unknown depth
+    rows = match_lines(np.array([20.0, 30.0]), np.array([1.0, 1.0]), np.array([-1, 1]), 5, 64, CFG)
+    gap = [r for r in rows if r[0] == 20.0 and r[2] == 30.0]
+    assert len(gap) == 1 and gap[0][5] == 0.0
+
+
+def _segments(rows: list[tuple[float, float, float, float, float]]) -> EPISegments:
+    a = jnp.asarray(np.array(rows, np.float32)[None])
+    ones = jnp.ones(a.shape[:2], bool)
+    return EPISegments(
+        left_pos=a[..., 0],
+        left_disp=a[..., 1],
+        right_pos=a[..., 2],
+        right_disp=a[..., 3],
+        disparity=a[..., 4],
+        known=ones,
+        left_cut=~ones,
+        right_cut=~ones,
+        valid=ones,
+        n_dropped=jnp.zeros((), jnp.int32),
+    )
+
+
+def test_render_segments_depth_order():
+    # background [-0.5, 7.5) at d = 0 and an object [2, 5) at d = 1 over 3 views
+    seg = _segments([(-0.5, 0.0, 7.5, 0.0, 0.0), (2.0, 1.0, 5.0, 1.0, 1.0)])
+    lab, d = render_segments(seg, n_views=3, width=8)
+    assert lab.shape == (1, 3, 8) and lab.dtype == jnp.int32
+    expect = np.array(
+        [
+            [0, 0, 0, 1, 1, 1, 0, 0],  # t = -1: the object at [3, 6)
+            [0, 0, 1, 1, 1, 0, 0, 0],  # t = 0: [2, 5)
+            [0, 1, 1, 1, 0, 0, 0, 0],  # t = +1: [1, 4)
+        ]
+    )
+    np.testing.assert_array_equal(np.asarray(lab[0]), expect)
+    np.testing.assert_array_equal(np.asarray(d[0]), expect.astype(np.float32))
+
+
+# ---- labels across views ------------------------------------------------------------------
+
+
+def test_forward_labels_shift_and_zbuffer():
+    lab = jnp.array([[0, 1, 2, -1]], jnp.int32)
+    d = jnp.array([[0.0, 1.0, 0.0, 0.0]], jnp.float32)
+    out, od = forward_labels(lab, d, jnp.float32(0.0), jnp.float32(1.0))
+    # pixel 1 (d = 1) moves to x = 0 and wins over pixel 0 (d = 0); x = 1 is a hole
+    np.testing.assert_array_equal(np.asarray(out[0]), [1, -1, 2, -1])
+    np.testing.assert_array_equal(np.asarray(od[0]), [1.0, 0.0, 0.0, 0.0])
+    jitted = jax.jit(forward_labels)(lab, d, jnp.float32(0.0), jnp.float32(1.0))
+    np.testing.assert_array_equal(np.asarray(jitted[0]), np.asarray(out))
+
+
+def test_nearest_fill_labels_everything():
+    lab = jnp.full((2, 5, 6), -1, jnp.int32).at[0, 0, 0].set(3).at[1, 4, 5].set(7)
+    d = jnp.zeros((2, 5, 6), jnp.float32).at[0, 0, 0].set(0.5)
+    fl, fd = nearest_fill(lab, d)
+    assert (np.asarray(fl[0]) == 3).all() and (np.asarray(fl[1]) == 7).all()
+    assert (np.asarray(fd[0]) == 0.5).all()
+    empty, _ = nearest_fill(jnp.full((1, 3, 3), -1, jnp.int32), jnp.zeros((1, 3, 3)))
+    assert (np.asarray(empty) == -1).all()  # nothing to copy from: stays unlabelled
+
+
+def test_propagation_follows_colour():
+    # left half red (label 0), right half blue (label 1); the middle columns are unlabelled
+    H, W = 4, 8
+    lab_img = np.zeros((1, H, W, 3), np.float32)
+    lab_img[0, :, :4] = (50.0, 60.0, 40.0)
+    lab_img[0, :, 4:] = (30.0, 10.0, -50.0)
+    labels = np.full((1, H, W), -1, np.int32)
+    labels[0, :, :3] = 0
+    labels[0, :, 5:] = 1
+    out, _ = propagate_labels(
+        jnp.asarray(lab_img),
+        jnp.asarray(labels),
+        jnp.zeros((1, H, W)),
+        jnp.zeros((1, 2)),
+        jnp.asarray(lab_img),
+        jnp.zeros((1, 2)),
+        1.0,
+        1.0,
+        1e-5,
+        radius=2,
+        passes=1,
+    )
+    np.testing.assert_array_equal(np.asarray(out[0, :, 3]), 0)  # red pixel, next to blue
+    np.testing.assert_array_equal(np.asarray(out[0, :, 4]), 1)
+
+
+# ---- the driver on a synthetic light field -----------------------------------------------
+
+
+def test_superpixels_bad_input(scene):
+    lf, _, edges, offset = scene
+    with pytest.raises(ValueError, match="surface_offset"):
+        superpixels(lf, CFG, edges=edges, surface_offset=offset[:3])
+    bad = lf.__class__(views=lf.views.at[0, 0, 0, 0, 0].set(jnp.nan), view_mask=lf.view_mask)
+    with pytest.raises(ValueError, match="NaN"):
+        superpixels(bad, CFG, edges=edges, surface_offset=offset)
+    with pytest.raises(ValueError, match="shape"):
+        kmeans_superpixels(lf, np.zeros((3, 3)), CFG)
+    empty = EdgeSet.empty(4)
+    res = superpixels(lf, SuperpixelConfig(size=16), edges=empty, surface_offset=jnp.zeros((4, 2)))
+    assert (np.asarray(res.labels) >= 0).all()  # no lines: border-to-border segments only
+
+
+@pytest.fixture(scope="module")
+def results(scene):
+    lf, ids, edges, offset = scene
+    cfg = SuperpixelConfig(size=12)
+    ours = superpixels(lf, cfg, edges=edges, surface_offset=offset)
+    noisy = np.asarray(lf.centre_gt) + np.random.default_rng(0).normal(0.0, 0.1, lf.size)
+    base = kmeans_superpixels(lf, noisy, cfg)
+    return ours, base
+
+
+def test_superpixels_shapes_and_coverage(scene, results):
+    lf, *_ = scene
+    ours, base = results
+    U, V = lf.grid
+    H, W = lf.size
+    for r in (ours, base):
+        assert r.labels.shape == (U, V, H, W) and r.labels.dtype == jnp.int32
+        assert r.disparity.shape == (U, V, H, W)
+        assert (np.asarray(r.labels) >= 0).all()  # every pixel of every view is labelled
+        assert np.isfinite(np.asarray(r.disparity)).all()
+        assert 0.0 < r.consistent_fraction <= 1.0
+    assert 10 <= np.unique(np.asarray(ours.labels)).size <= 2 * ours.n_superpixels
+
+
+def test_superpixels_respect_objects_and_views(scene, results):
+    lf, ids, *_ = scene
+    ours, base = results
+    gt = np.asarray(lf.gt_disparity)
+    asa = achievable_segmentation_accuracy(ours.labels, ids)
+    assert asa > 0.9
+    # the piece-wise constant disparity (slanted floor and wall, no texture lines in the
+    # oracle edge set) is within half a pixel per view step on most pixels
+    err = np.abs(np.asarray(ours.disparity) - gt)
+    assert np.median(err) < 0.5
+    # view consistency: a centre pixel followed through the 25 views meets few labels
+    # (measured 1.29; 1.0 = perfectly consistent) and superpixel centres stay put (1.45 px).
+    # The k-means baseline with a slightly noisy GT disparity is still better here (1.21):
+    # see docs/SUPERPIXELS.md, "Known limitations".
+    assert labels_per_pixel(ours.labels, gt[2, 2], gt) < 1.4
+    assert labels_per_pixel(base.labels, gt[2, 2], gt) < 1.4
+    assert self_similarity_error(ours.labels, gt) < 2.0
