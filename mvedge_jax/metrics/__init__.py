@@ -6,3 +6,4 @@ from ._depth import badpix as badpix
 from ._depth import depth_metrics as depth_metrics
 from ._depth import mse_x100 as mse_x100
 from ._depth import q25_x100 as q25_x100
+from ._scalefit import scale_fit_metrics as scale_fit_metrics
