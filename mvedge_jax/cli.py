@@ -490,6 +490,9 @@ def mvs(
             for b in bars.values():
                 b.close()
             bars[view] = tqdm(total=mvs_steps(config), desc=view, unit="step", leave=True)
+        if step < 0:
+            bars[view].set_postfix_str(f"{stage} points: diffusing (compiles on first view)")
+            return
         bars[view].update(1)
         bars[view].set_postfix_str(f"{stage} loss {info['loss']:.5f}")
 

@@ -41,6 +41,8 @@ from .diff import (
 from .io import read_colmap_model, read_rgb
 from .io._colmap import ColmapModel
 
+_CAPACITY_STEP = 1024  # point capacities are rounded up to a multiple of this
+
 # fewer, cheaper points than the light-field default: a handful of points per tile
 _RENDER = RenderConfig(nearer="larger", density=0.5, tile_levels=((24, 1.0), (48, 0.5), (96, 0.2)))
 
@@ -244,7 +246,8 @@ class MVSResult:
             preliminary and the edge augmentation, and after the full optimisation.
         sparse_points: ``(Ns, 3)`` ``(x, y, label)`` of the sparse points.
         edge_points: ``(Ne, 3)`` ``(x, y, label)`` of the added edge points.
-        params: the final `DiffParams`.
+        params: the final `DiffParams` (capacity rounded up; ``params.label[:Ns + Ne]``
+            are the sparse then the edge points, the rest is unused padding).
         cameras: the `MultiViewCameras` (``scale = f·B``).
         sources: names of the source views.
         loss: ``(steps,)`` loss of every Adam step (preliminary, then final).
@@ -277,7 +280,8 @@ def estimate_depth_mvs(
         data: `MVSInput` holding at least the reference and one other image.
         reference: reference image name.
         config: `MVSConfig`.
-        progress: called as ``progress(stage, step, info)`` after every Adam step, stage
+        progress: called as ``progress("sparse", -1, {})`` before the first (compiling)
+            diffusion and as ``progress(stage, step, info)`` after every Adam step, stage
             ``"prelim"`` or ``"optimize"``.
 
     Returns:
@@ -330,19 +334,25 @@ def estimate_depth_mvs(
         avoid=pos,
         gap=config.edge_gap,
     )
-    # one fixed-capacity point set for every stage: the edge points are masked out until
-    # they receive their labels (one compilation of the step serves all stages)
-    n_sparse = len(pos)
+    # one fixed-capacity point set for every stage (and, rounded up to a multiple of
+    # `_CAPACITY_STEP`, for most views): the edge points are masked out until they receive
+    # their labels, the padding always (one compilation of the step serves them all)
+    n_sparse, n_edge = len(pos), len(ep)
+    n = n_sparse + n_edge
+    cap = -(-n // _CAPACITY_STEP) * _CAPACITY_STEP
     mean = float(np.mean(lab))
     params = DiffParams(
-        position=jnp.asarray(np.concatenate([pos, ep]), jnp.float32),
-        label=jnp.asarray(np.concatenate([lab, np.full(len(ep), mean)]), jnp.float32),
-        R=jnp.zeros(n_sparse + len(ep), jnp.float32),
+        position=jnp.asarray(np.concatenate([pos, ep, np.zeros((cap - n, 2))]), jnp.float32),
+        label=jnp.full(cap, mean, jnp.float32).at[:n_sparse].set(lab),
+        R=jnp.zeros(cap, jnp.float32),
         Q=initial_params(jnp.asarray(pos), jnp.asarray(lab), ref, config.optimize.model).Q,
     )
-    sparse_only = jnp.arange(n_sparse + len(ep)) < n_sparse
+    index = jnp.arange(cap)
+    sparse_only, every = index < n_sparse, index < n
     run = functools.partial(optimize_multiview, reference=ref, sources=srcs, cameras=cams)
     evaluate = dataclasses.replace(config.optimize, passes=0)
+    if progress is not None:
+        progress("sparse", -1, {})
     _, hist = run(params, config=evaluate, valid=sparse_only)
     sparse_label = hist["label"]
     seconds["sparse"] = time.perf_counter() - t0
@@ -364,10 +374,8 @@ def estimate_depth_mvs(
         prelim = hist["label"]
         loss.append(hist["loss"])
     elab = np.asarray(sample_bilinear(jnp.asarray(prelim), jnp.asarray(ep)))
-    params = eqx.tree_at(
-        lambda p: p.label, params, jnp.asarray(np.concatenate([lab, elab]), jnp.float32)
-    )
-    _, hist = run(params, config=evaluate, x0=prelim)
+    params = eqx.tree_at(lambda p: p.label, params, params.label.at[n_sparse:n].set(elab))
+    _, hist = run(params, config=evaluate, valid=every, x0=prelim)
     augmented = hist["label"]
     seconds["augment"] = time.perf_counter() - t0
 
@@ -375,6 +383,7 @@ def estimate_depth_mvs(
     params, hist = run(
         params,
         config=config.optimize,
+        valid=every,
         x0=augmented,
         callback=None if progress is None else (lambda k, i: progress("optimize", k, i)),
     )
@@ -414,6 +423,9 @@ def _plain(obj):
         return [_plain(v) for v in obj]
     if isinstance(obj, (np.ndarray, jnp.ndarray)) or hasattr(obj, "__array__"):
         a = np.asarray(obj)
+        if a.dtype == np.float32:  # shortest decimals that round-trip in float32
+            short = [float(np.format_float_positional(v, unique=True)) for v in a.ravel()]
+            a = np.array(short).reshape(a.shape)
         return a.item() if a.ndim == 0 else a.tolist()
     return obj
 

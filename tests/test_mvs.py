@@ -269,3 +269,39 @@ def test_binary_model_gives_the_same_input(scene, tmp_path):
 
 def _no_nan(token):
     raise ValueError(f"metrics.json is not strict JSON: {token}")
+
+
+def test_all_views_share_one_compilation(scene, project, result, tmp_path):
+    """``all_views``: every image as the reference, outputs and scale-fit errors for each
+    (evaluation only here: no Adam step; the padded point capacity avoids recompiling)."""
+    base = _config()
+    cfg = dataclasses.replace(
+        base, prelim_iterations=0, optimize=dataclasses.replace(base.optimize, passes=0)
+    )
+    out = tmp_path / "all"
+    metrics = run_mvs(
+        project / "sparse", out, all_views=True, config=cfg, gt_dir=project / "depth_gt"
+    )
+    assert sorted(metrics["views"]) == scene.names
+    for name, v in metrics["views"].items():
+        stem = name[:-4]
+        assert (out / "depth" / f"{stem}.pfm").is_file()
+        assert len(v["sources"]) == 4 and name not in v["sources"]
+        assert v["scale_fit"]["sparse"]["mse"] < 2.0
+    assert metrics["scale_fit_mean"]["sparse"]["mse"] < 1.5
+
+
+def test_multiview_loss_gradient(x64):
+    """Reverse-mode gradient of eq 7.16 between posed views against finite differences."""
+    from jax.test_util import check_grads
+
+    tiny = make_multiview_scene(n_views=3, size=(12, 16), supersample=1, n_points=50)
+    srcs = [tiny.names[0], tiny.names[2]]
+    cams = multiview_cameras(tiny.model, tiny.names[1], srcs)
+    cams = jax.tree.map(lambda a: jnp.asarray(a, jnp.float64), cams)
+    ref = jnp.asarray(tiny.images[1], jnp.float64)
+    others = jnp.asarray(tiny.images[[0, 2]], jnp.float64)
+    label = cams.label(jnp.asarray(tiny.depth[1])) * 1.02
+    cfg = LossConfig()
+    loss = jax.jit(lambda d: multiview_loss(d, ref, others, cams, cfg))
+    check_grads(loss, (label,), order=1, modes=("rev",), eps=1e-6)
