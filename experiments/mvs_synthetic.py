@@ -18,7 +18,7 @@ compilation).
 
 Example::
 
-    .venv/bin/python experiments/mvs_synthetic.py --views 5 --refs 2,0 --size 96x128
+    .venv/bin/python experiments/mvs_synthetic.py --views 5 --refs 2,4,0 --size 96x128
 """
 
 from __future__ import annotations

@@ -55,7 +55,8 @@ class MVSConfig(eqx.Module):
             turns of 25 iterations, 5 passes); its ``model`` and ``loss`` serve every stage.
             The learning rates (label, position, R, Q) are larger than the light-field
             defaults: labels here span tens of pixels of parallax (on the synthetic scene,
-            scale-fit MSE 0.45 → 0.23 with the full schedule, experiments/mvs_synthetic.py).
+            scale-fit MSE 0.45 → 0.28 for its middle view with the full schedule,
+            experiments/mvs_synthetic.py).
         prelim_iterations: Adam steps on the smoothness ``Q`` alone before the edge
             sampling (thesis: 50).
         sources: the most source views per reference (the nearest camera centres).
