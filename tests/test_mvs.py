@@ -199,8 +199,8 @@ def _copy_model(project, tmp_path):
 def test_mvs_depth_on_the_synthetic_scene(scene, result):
     """Scale-fit errors (thesis protocol) on the 96×128 five-view scene, depths 3–14.
 
-    Measured with this short schedule: MSE 1.17 (sparse points diffused) → 0.42 (optimised),
-    Q25 0.070 → 0.020; the thesis' schedule reaches ~0.23 (experiments/mvs_synthetic.py).
+    Measured with this short schedule: MSE 1.17 (sparse points diffused) → 0.40 (optimised),
+    Q25 0.070 → 0.024; the thesis' schedule reaches 0.22 (experiments/mvs_synthetic.py).
     """
     gt = scene.depth[2]
     m = {k: scale_fit_metrics(v, gt) for k, v in result.stages.items()}
