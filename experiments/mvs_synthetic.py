@@ -13,8 +13,8 @@ of ten fits) after each stage:
 
 MSE is in squared scene units (depths 3–14), Q25 ×100 in scene units (Table 7.1 scale).
 ``--thesis-lr`` uses the light-field learning rates of `OptimizeConfig` instead of the
-`MVSConfig` defaults. Seconds are wall time on the machine it runs on (first view includes
-compilation).
+`MVSConfig` defaults; ``--gradient-reward 0.05`` restores eq 7.16's error-gradient reward.
+Seconds are wall time on the machine it runs on (the first view includes compilation).
 
 Example::
 
@@ -45,8 +45,16 @@ from mvedge_jax.synthetic import make_multiview_scene, write_multiview_scene
 @click.option("--iterations", default=25, show_default=True)
 @click.option("--passes", default=5, show_default=True)
 @click.option("--thesis-lr", is_flag=True, help="Light-field learning rates (0.015, 0.1, ...).")
+@click.option(
+    "--gradient-reward",
+    type=float,
+    default=None,
+    help="LossConfig.gradient_reward (eq 7.16's -∇E weight; MVSConfig default 0).",
+)
 @click.option("--json", "json_path", default=None, help="Also write the rows as JSON.")
-def main(views, size, refs, prelim, iterations, passes, thesis_lr, json_path) -> None:
+def main(
+    views, size, refs, prelim, iterations, passes, thesis_lr, gradient_reward, json_path
+) -> None:
     H, W = (int(v) for v in size.lower().split("x"))
     t0 = time.perf_counter()
     scene = make_multiview_scene(n_views=views, size=(H, W))
@@ -62,6 +70,10 @@ def main(views, size, refs, prelim, iterations, passes, thesis_lr, json_path) ->
     opt = dataclasses.replace(base.optimize, iterations=iterations, passes=passes)
     if thesis_lr:
         opt = dataclasses.replace(opt, learning_rate=OptimizeConfig().learning_rate)
+    if gradient_reward is not None:
+        opt = dataclasses.replace(
+            opt, loss=dataclasses.replace(opt.loss, gradient_reward=gradient_reward)
+        )
     config = dataclasses.replace(base, prelim_iterations=prelim, optimize=opt)
     rows = []
     header = (
