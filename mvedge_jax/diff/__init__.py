@@ -6,7 +6,8 @@ compositing with σ_Z = 1 and 8 quadrature samples, nearer points occluding fart
 rendered in parallel 8×8 tiles) → `predict` (eq 7.2 diffusion with ϑ = exp(-Q) through the
 differentiable `mvedge_jax.solve.solve_poisson`) → losses (`supervised_loss`, eq 7.16
 `self_supervised_loss`) → `optimize` (block-coordinate Adam over Z, positions, R, Q).
-Unstructured input: `sparse_depth_points` from a COLMAP model, `warp_by_depth`.
+Unstructured input (Sec. 7.2.2): `sparse_depth_points` from a COLMAP model, `warp_by_depth`,
+`multiview_loss` (eq 7.16 between posed views) and `optimize_multiview`.
 
 Choices where the thesis leaves room (see the docstrings for details):
 
@@ -45,8 +46,14 @@ from ._model import (
     smoothness_weights,
 )
 from ._multiview import (
+    MultiViewCameras,
     SparseDepth,
     intrinsics,
+    multiview_cameras,
+    multiview_loss,
+    multiview_occlusion_mask,
+    multiview_photometric_terms,
+    optimize_multiview,
     project_points,
     relative_pose,
     sparse_depth_points,
@@ -64,6 +71,7 @@ __all__ = [
     "Prediction",
     "RenderConfig",
     "RenderResult",
+    "MultiViewCameras",
     "SparseDepth",
     "SplatResult",
     "edge_aware_smoothness",
@@ -72,9 +80,14 @@ __all__ = [
     "initial_q",
     "intrinsics",
     "label_kernel_1d",
+    "multiview_cameras",
+    "multiview_loss",
+    "multiview_occlusion_mask",
+    "multiview_photometric_terms",
     "objective",
     "occlusion_mask",
     "optimize",
+    "optimize_multiview",
     "params_from_edges",
     "photometric_terms",
     "predict",

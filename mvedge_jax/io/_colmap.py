@@ -1,4 +1,5 @@
-"""COLMAP sparse models in the text format (``cameras.txt``, ``images.txt``, ``points3D.txt``).
+"""COLMAP sparse models, text (``cameras.txt``, ``images.txt``, ``points3D.txt``) and binary
+(``cameras.bin``, ``images.bin``, ``points3D.bin``).
 
 Conventions (COLMAP): an image's pose maps world to camera coordinates,
 ``X_cam = R(q) X_world + t`` with the unit quaternion ``q = (qw, qx, qy, qz)``; the camera looks
@@ -8,13 +9,14 @@ to get this project's convention (pixel centres at integers).
 
 References:
     Schönberger & Frahm, "Structure-from-Motion Revisited", CVPR 2016; COLMAP documentation,
-    "Output format" (text models). Thesis Sec. 7.2.2 (sparse COLMAP points as input).
+    "Output format" (text and binary models). Thesis Sec. 7.2.2 (sparse COLMAP points as input).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import os
+import struct
 
 import numpy as np
 
@@ -430,3 +432,271 @@ def write_colmap_text(model: ColmapModel, folder: str | os.PathLike) -> None:
             r, g, b = (int(v) for v in P.rgb[i])
             tr = " ".join(f"{int(a)} {int(b_)}" for a, b_ in P.tracks[i].tolist())
             f.write(f"{int(P.ids[i])} {x} {y} {z} {r} {g} {b} {float(P.error[i])!r} {tr}\n")
+
+
+# COLMAP's numeric camera model ids (``CameraModelId`` in colmap/sensor/models.h)
+CAMERA_MODEL_IDS: dict[int, str] = {
+    0: "SIMPLE_PINHOLE",
+    1: "PINHOLE",
+    2: "SIMPLE_RADIAL",
+    3: "RADIAL",
+    4: "OPENCV",
+    5: "OPENCV_FISHEYE",
+    6: "FULL_OPENCV",
+    7: "FOV",
+    8: "SIMPLE_RADIAL_FISHEYE",
+    9: "RADIAL_FISHEYE",
+    10: "THIN_PRISM_FISHEYE",
+}
+_MODEL_ID = {name: i for i, name in CAMERA_MODEL_IDS.items()}
+
+_POINT2D = np.dtype([("x", "<f8"), ("y", "<f8"), ("id", "<i8")])
+_TRACK = np.dtype([("image_id", "<i4"), ("point2d_idx", "<i4")])
+
+
+class _Reader:
+    """Little-endian reads from a bytes buffer with error messages that name the file."""
+
+    def __init__(self, path: str):
+        self.path = path
+        with open(path, "rb") as f:
+            self.buf = f.read()
+        self.pos = 0
+
+    def take(self, n: int) -> bytes:
+        if self.pos + n > len(self.buf):
+            raise ValueError(
+                f"{self.path}: truncated COLMAP binary file (needed {n} bytes at offset "
+                f"{self.pos}, file has {len(self.buf)})"
+            )
+        out = self.buf[self.pos : self.pos + n]
+        self.pos += n
+        return out
+
+    def unpack(self, fmt: str) -> tuple:
+        return struct.unpack("<" + fmt, self.take(struct.calcsize("<" + fmt)))
+
+    def array(self, dtype: np.dtype, count: int) -> np.ndarray:
+        return np.frombuffer(self.take(dtype.itemsize * count), dtype=dtype, count=count)
+
+    def name(self) -> str:
+        end = self.buf.find(b"\x00", self.pos)
+        if end < 0:
+            raise ValueError(f"{self.path}: unterminated image name at offset {self.pos}")
+        out = self.buf[self.pos : end].decode("utf-8")
+        self.pos = end + 1
+        return out
+
+    def done(self) -> None:
+        if self.pos != len(self.buf):
+            raise ValueError(
+                f"{self.path}: {len(self.buf) - self.pos} unexpected trailing bytes after the "
+                "last record"
+            )
+
+
+def read_colmap_cameras_binary(path: str | os.PathLike) -> dict[int, ColmapCamera]:
+    """Parse ``cameras.bin``.
+
+    Layout (little-endian): ``uint64 count``; per camera ``int32 camera_id, int32 model_id,
+    uint64 width, uint64 height, float64 params[P]`` (``P`` fixed by the model).
+
+    Raises:
+        FileNotFoundError: if the file is missing.
+        ValueError: on an unknown model id, invalid size or a truncated file.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"COLMAP cameras file not found: {path}")
+    r = _Reader(path)
+    (count,) = r.unpack("Q")
+    cams: dict[int, ColmapCamera] = {}
+    for _ in range(count):
+        cid, mid, w, h = r.unpack("iiQQ")
+        if mid not in CAMERA_MODEL_IDS:
+            raise ValueError(
+                f"{path}: camera {cid} has unknown model id {mid}; known: {CAMERA_MODEL_IDS}"
+            )
+        model = CAMERA_MODEL_IDS[mid]
+        params = np.array(r.unpack("d" * CAMERA_MODELS[model]), np.float64)
+        if w <= 0 or h <= 0:
+            raise ValueError(f"{path}: camera {cid} has invalid image size {w}x{h}")
+        cams[cid] = ColmapCamera(cid, model, int(w), int(h), params)
+    r.done()
+    return cams
+
+
+def read_colmap_images_binary(path: str | os.PathLike) -> dict[int, ColmapImage]:
+    """Parse ``images.bin``.
+
+    Layout (little-endian): ``uint64 count``; per image ``int32 image_id, float64 qvec[4],
+    float64 tvec[3], int32 camera_id``, the NUL-terminated name, ``uint64 n`` and ``n``
+    records ``float64 x, float64 y, int64 point3d_id``.
+
+    Raises:
+        FileNotFoundError: if the file is missing.
+        ValueError: on a truncated or malformed file.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"COLMAP images file not found: {path}")
+    r = _Reader(path)
+    (count,) = r.unpack("Q")
+    images: dict[int, ColmapImage] = {}
+    for _ in range(count):
+        rec = r.unpack("i7di")
+        iid, q, t, cid = rec[0], np.array(rec[1:5]), np.array(rec[5:8]), rec[8]
+        name = r.name()
+        (n,) = r.unpack("Q")
+        pts = r.array(_POINT2D, n)
+        xys = np.stack([pts["x"], pts["y"]], axis=1).astype(np.float64)
+        images[iid] = ColmapImage(iid, q, t, cid, name, xys, pts["id"].astype(np.int64))
+    r.done()
+    return images
+
+
+def read_colmap_points3d_binary(path: str | os.PathLike) -> ColmapPoints:
+    """Parse ``points3D.bin``.
+
+    Layout (little-endian): ``uint64 count``; per point ``uint64 point3d_id, float64 xyz[3],
+    uint8 rgb[3], float64 error, uint64 track_length`` and ``track_length`` records
+    ``int32 image_id, int32 point2d_idx``.
+
+    Raises:
+        FileNotFoundError: if the file is missing.
+        ValueError: on a truncated or malformed file.
+    """
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"COLMAP points file not found: {path}")
+    r = _Reader(path)
+    (count,) = r.unpack("Q")
+    ids = np.empty(count, np.int64)
+    xyz = np.empty((count, 3), np.float64)
+    rgb = np.empty((count, 3), np.uint8)
+    err = np.empty(count, np.float64)
+    tracks = []
+    for k in range(count):
+        rec = r.unpack("Q3d3Bd")
+        ids[k], xyz[k], rgb[k], err[k] = rec[0], rec[1:4], rec[4:7], rec[7]
+        (n,) = r.unpack("Q")
+        tr = r.array(_TRACK, n)
+        tracks.append(np.stack([tr["image_id"], tr["point2d_idx"]], axis=1).astype(np.int64))
+    r.done()
+    return ColmapPoints(
+        ids=ids,
+        xyz=xyz,
+        rgb=rgb,
+        error=err,
+        track_length=np.array([len(t) for t in tracks], np.int64),
+        tracks=tuple(tracks),
+    )
+
+
+def _check_cameras(model: ColmapModel, source: str) -> ColmapModel:
+    missing = sorted({im.camera_id for im in model.images.values()} - set(model.cameras))
+    if missing:
+        raise ValueError(f"{source}: images reference cameras {missing} absent from the model")
+    return model
+
+
+def read_colmap_binary(folder: str | os.PathLike) -> ColmapModel:
+    """Read a COLMAP binary model folder (``cameras.bin``, ``images.bin``, ``points3D.bin``).
+
+    Args:
+        folder: the model folder (e.g. ``sparse/0`` as written by ``colmap mapper``).
+
+    Returns:
+        A `ColmapModel` (the same numbers as `read_colmap_text` of the converted model).
+
+    Raises:
+        FileNotFoundError: if the folder or one of the three files is missing.
+        ValueError: on malformed files, or images that reference unknown cameras.
+
+    References:
+        COLMAP documentation, "Output format" (binary models; ``read_write_model.py``);
+        thesis Sec. 7.2.2.
+    """
+    folder = os.fspath(folder)
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"COLMAP model folder not found: {folder}")
+    paths = [os.path.join(folder, n) for n in ("cameras.bin", "images.bin", "points3D.bin")]
+    for p in paths:
+        if not os.path.isfile(p):
+            raise FileNotFoundError(f"COLMAP binary model file missing: {p}")
+    model = ColmapModel(
+        cameras=read_colmap_cameras_binary(paths[0]),
+        images=read_colmap_images_binary(paths[1]),
+        points3d=read_colmap_points3d_binary(paths[2]),
+    )
+    return _check_cameras(model, folder)
+
+
+def write_colmap_binary(model: ColmapModel, folder: str | os.PathLike) -> None:
+    """Write a `ColmapModel` as COLMAP binary files (round-trips with `read_colmap_binary`).
+
+    Args:
+        model: the model.
+        folder: output folder (created if needed).
+
+    Raises:
+        ValueError: for a camera model without a COLMAP model id.
+    """
+    folder = os.fspath(folder)
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, "cameras.bin"), "wb") as f:
+        f.write(struct.pack("<Q", len(model.cameras)))
+        for c in model.cameras.values():
+            if c.model not in _MODEL_ID:
+                raise ValueError(f"camera model {c.model} has no COLMAP binary id")
+            f.write(struct.pack("<iiQQ", c.camera_id, _MODEL_ID[c.model], c.width, c.height))
+            f.write(np.asarray(c.params, "<f8").tobytes())
+    with open(os.path.join(folder, "images.bin"), "wb") as f:
+        f.write(struct.pack("<Q", len(model.images)))
+        for im in model.images.values():
+            f.write(struct.pack("<i7di", im.image_id, *im.qvec, *im.tvec, im.camera_id))
+            f.write(im.name.encode("utf-8") + b"\x00")
+            pts = np.empty(len(im.point3d_ids), _POINT2D)
+            pts["x"], pts["y"] = im.xys[:, 0], im.xys[:, 1]
+            pts["id"] = im.point3d_ids
+            f.write(struct.pack("<Q", len(pts)) + pts.tobytes())
+    with open(os.path.join(folder, "points3D.bin"), "wb") as f:
+        P = model.points3d
+        f.write(struct.pack("<Q", len(P)))
+        for i in range(len(P)):
+            f.write(struct.pack("<Q3d3Bd", int(P.ids[i]), *P.xyz[i], *P.rgb[i], P.error[i]))
+            tr = np.empty(len(P.tracks[i]), _TRACK)
+            tr["image_id"], tr["point2d_idx"] = P.tracks[i][:, 0], P.tracks[i][:, 1]
+            f.write(struct.pack("<Q", len(tr)) + tr.tobytes())
+
+
+def read_colmap_model(folder: str | os.PathLike) -> ColmapModel:
+    """Read a COLMAP model folder in either format: binary when ``cameras.bin``,
+    ``images.bin`` and ``points3D.bin`` are all there, else text.
+
+    Args:
+        folder: the model folder.
+
+    Returns:
+        A `ColmapModel`.
+
+    Raises:
+        FileNotFoundError: if the folder holds neither a complete binary nor a complete text
+            model (the message lists what is there).
+        ValueError: on malformed files.
+
+    References:
+        COLMAP documentation, "Output format".
+    """
+    folder = os.fspath(folder)
+    if not os.path.isdir(folder):
+        raise FileNotFoundError(f"COLMAP model folder not found: {folder}")
+    names = ("cameras", "images", "points3D")
+    if all(os.path.isfile(os.path.join(folder, n + ".bin")) for n in names):
+        return read_colmap_binary(folder)
+    if all(os.path.isfile(os.path.join(folder, n + ".txt")) for n in names):
+        return read_colmap_text(folder)
+    raise FileNotFoundError(
+        f"{folder} is not a COLMAP model: need cameras, images and points3D as .bin or .txt; "
+        f"found {sorted(os.listdir(folder))}"
+    )

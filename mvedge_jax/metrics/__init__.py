@@ -15,6 +15,7 @@ from ._depth import mse_x100 as mse_x100
 from ._depth import q25_hci_x100 as q25_hci_x100
 from ._depth import q25_x100 as q25_x100
 from ._depth import read_region_masks as read_region_masks
+from ._scalefit import scale_fit_metrics as scale_fit_metrics
 from ._superpixel import achievable_segmentation_accuracy as achievable_segmentation_accuracy
 from ._superpixel import boundary_mask as boundary_mask
 from ._superpixel import boundary_recall as boundary_recall

@@ -1,5 +1,8 @@
 """Procedural light fields with exact ground-truth disparity and object IDs for every view."""
 
+from ._multiview import MultiViewScene as MultiViewScene
+from ._multiview import make_multiview_scene as make_multiview_scene
+from ._multiview import write_multiview_scene as write_multiview_scene
 from ._scene import DISC as DISC
 from ._scene import RECT as RECT
 from ._scene import WHOLE as WHOLE

@@ -25,9 +25,13 @@ from mvedge_jax.io._colmap import (
     ColmapModel,
     ColmapPoints,
     qvec_to_rotmat,
+    read_colmap_binary,
     read_colmap_cameras,
+    read_colmap_cameras_binary,
+    read_colmap_model,
     read_colmap_text,
     rotmat_to_qvec,
+    write_colmap_binary,
     write_colmap_text,
 )
 
@@ -211,3 +215,62 @@ def test_bad_colmap_files(tmp_path):
         read_colmap_text(tmp_path / "nope")
     R = qvec_to_rotmat(rotmat_to_qvec(_rot_y(30.0)))
     np.testing.assert_allclose(R, _rot_y(30.0), atol=1e-12)
+
+
+def _assert_same_model(a: ColmapModel, b: ColmapModel) -> None:
+    assert a.cameras.keys() == b.cameras.keys() and a.images.keys() == b.images.keys()
+    for k, c in a.cameras.items():
+        d = b.cameras[k]
+        assert (c.model, c.width, c.height) == (d.model, d.width, d.height)
+        np.testing.assert_array_equal(c.params, d.params)
+    for k, im in a.images.items():
+        jm = b.images[k]
+        assert (im.name, im.camera_id) == (jm.name, jm.camera_id)
+        np.testing.assert_array_equal(im.qvec, jm.qvec)
+        np.testing.assert_array_equal(im.tvec, jm.tvec)
+        np.testing.assert_array_equal(im.xys, jm.xys)
+        np.testing.assert_array_equal(im.point3d_ids, jm.point3d_ids)
+    P, Q = a.points3d, b.points3d
+    for f in ("ids", "xyz", "rgb", "error", "track_length"):
+        np.testing.assert_array_equal(getattr(P, f), getattr(Q, f))
+    for s, t in zip(P.tracks, Q.tracks, strict=True):
+        np.testing.assert_array_equal(s, t)
+
+
+def test_binary_model_round_trips_and_matches_text(scene, tmp_path):
+    folder, _, _ = scene
+    text = read_colmap_text(folder)
+    write_colmap_binary(text, tmp_path / "bin")
+    assert sorted(p.name for p in (tmp_path / "bin").iterdir()) == [
+        "cameras.bin",
+        "images.bin",
+        "points3D.bin",
+    ]
+    binary = read_colmap_binary(tmp_path / "bin")
+    _assert_same_model(text, binary)
+    _assert_same_model(text, read_colmap_model(tmp_path / "bin"))
+    _assert_same_model(text, read_colmap_model(folder))  # text folder
+    # the first bytes are COLMAP's: uint64 count, then int32 id, int32 model id 1 (PINHOLE)
+    raw = (tmp_path / "bin" / "cameras.bin").read_bytes()
+    assert raw[:8] == (1).to_bytes(8, "little") and raw[12:16] == (1).to_bytes(4, "little")
+
+
+def test_bad_binary_models(scene, tmp_path):
+    folder, _, _ = scene
+    write_colmap_binary(read_colmap_text(folder), tmp_path)
+    cams = tmp_path / "cameras.bin"
+    raw = cams.read_bytes()
+    cams.write_bytes(raw[:-4])
+    with pytest.raises(ValueError, match="truncated"):
+        read_colmap_cameras_binary(cams)
+    cams.write_bytes(raw + b"xx")
+    with pytest.raises(ValueError, match="trailing bytes"):
+        read_colmap_cameras_binary(cams)
+    cams.write_bytes(raw[:12] + (99).to_bytes(4, "little") + raw[16:])
+    with pytest.raises(ValueError, match="unknown model id 99"):
+        read_colmap_cameras_binary(cams)
+    (tmp_path / "points3D.bin").unlink()
+    with pytest.raises(FileNotFoundError, match="points3D.bin"):
+        read_colmap_binary(tmp_path)
+    with pytest.raises(FileNotFoundError, match="not a COLMAP model"):
+        read_colmap_model(tmp_path)
