@@ -39,8 +39,7 @@ from .diff import (
     sample_bilinear,
     sparse_depth_points,
 )
-from .io import read_colmap_model, read_rgb
-from .io._colmap import ColmapModel
+from .io import ColmapModel, read_colmap_model, read_rgb
 
 _CAPACITY_STEP = 1024  # point capacities are rounded up to a multiple of this
 

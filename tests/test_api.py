@@ -32,15 +32,16 @@ PUBLIC = (
     "estimate_disparity_arrays",
     "load_light_field",
     "optimize_disparity",
-    "reconstruct",
     "smooth_config",
+    "sweep",
+    "tune",
     "surface_vectors",
     "view_consistency",
 )
 
 #: Parameters that may be passed by position although they have a default: the stage's
-#: configuration follows the data it configures.
-POSITIONAL_OPTIONS = {"config"}
+#: configuration follows the data it configures, and an optional validity mask is data.
+POSITIONAL_OPTIONS = {"config", "mask"}
 
 
 def _public_functions():

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..io._colmap import ColmapCamera, ColmapImage, ColmapModel
+from ..io import ColmapCamera, ColmapImage, ColmapModel
 from ..lightfield import ssim_dissimilarity
 from ._loss import LossConfig, _grad_abs, edge_aware_smoothness
 from ._model import DiffParams, predict
