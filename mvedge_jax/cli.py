@@ -259,7 +259,7 @@ def _config_from_file(path: str | None):
 def _check_config_early(config_path: str | None, path: str, views, scale) -> None:
     """Parse the config and bound its memory need from the folder's layout, before any
     pixel is read."""
-    from .pipeline._checks import check_memory_before_loading
+    from .pipeline import check_memory_before_loading
 
     config = _config_from_file(config_path)
     try:
@@ -379,6 +379,7 @@ def run_depth(
     load_info: LayoutInfo | None = None,
     load_seconds: float | None = None,
     checked: bool = False,
+    writer=None,
 ) -> dict:
     """Run the main job on a loaded light field and write every output into ``out``.
 
@@ -465,7 +466,11 @@ def run_depth(
             window=None if load_info is None else load_info.window,
         )
         prov["seconds_load"] = load_seconds
-        writer = OutputWriter(out, force=force, source=lf.source)
+        if writer is None:
+            try:
+                writer = OutputWriter(out, force=force, source=lf.source)
+            except ValueError as e:  # OutputError: a concurrent run holds the lock, ...
+                raise click.ClickException(str(e)) from None
         try:
             metrics = write_outputs(
                 writer,
@@ -662,17 +667,27 @@ def depth(
         seed=seed,
         formats=formats,
     )
+    _config_from_file(config_path)  # a bad config fails before any scene is loaded
     if len(folders) == 1:
-        lf, info, seconds = load_or_exit(folders[0], views, scale, transpose)
-        click.echo(f"loaded {folders[0]} in {seconds:.2f} s")
-        camera = _camera_or_exit(read_hci_camera, info.folder, formats)
-        job(
-            lf,
-            out or os.path.join("mvedge_out", lf.name),
-            camera=camera,
-            load_info=info,
-            load_seconds=seconds,
-        )
+        target = out or os.path.join("mvedge_out", os.path.basename(os.path.normpath(folders[0])))
+        try:  # the output location is checked before the scene is loaded
+            check_output_dir(target, folders[0], force=force)
+        except ValueError as e:
+            raise click.ClickException(str(e)) from None
+        # locked and staged before the scene is loaded; SIGTERM cleans up like Ctrl-C
+        with output_session(target, folders[0], force=force) as writer:
+            lf, info, seconds = load_or_exit(folders[0], views, scale, transpose)
+            click.echo(f"loaded {folders[0]} in {seconds:.2f} s")
+            camera = _camera_or_exit(read_hci_camera, info.folder, formats)
+            job(
+                lf,
+                target,
+                camera=camera,
+                load_info=info,
+                load_seconds=seconds,
+                checked=True,
+                writer=writer,
+            )
         return
     root = out or "mvedge_out"
     names = [os.path.basename(os.path.normpath(f)) for f in folders]

@@ -56,10 +56,11 @@ def fake_pipeline(monkeypatch):
     """`estimate_disparity` and `write_outputs` replaced by instant stand-ins; records the
     calls (``loads``, ``runs``) and can be told to fail (``fail_write``) or to act mid-run
     (``during``)."""
+    import mvedge_jax.io as mvedge_io
     import mvedge_jax.pipeline as pl
 
     state = SimpleNamespace(loads=0, runs=0, fail_write=False, during=None)
-    real_load = cli.load_light_field_with_info
+    real_load = mvedge_io.load_light_field_with_info
 
     def load(*args, **kwargs):
         state.loads += 1
@@ -71,7 +72,7 @@ def fake_pipeline(monkeypatch):
             state.during()
         return SimpleNamespace(name=lf.name)
 
-    def write(writer, lf, result, *, seconds_total, initial=None, optimize_info=None):
+    def write(writer, lf, result, *, seconds_total, initial=None, optimize_info=None, **kw):
         writer.pfm("disparity/view_00_00.pfm", np.zeros((4, 4), np.float32))
         metrics = {"seconds_per_stage": {}, "mse_x100": float("inf"), "warnings": ["w1"]}
         writer.json("metrics.json", metrics)
@@ -79,7 +80,7 @@ def fake_pipeline(monkeypatch):
             raise OSError(28, "No space left on device")
         return metrics
 
-    monkeypatch.setattr(cli, "load_light_field_with_info", load)
+    monkeypatch.setattr(mvedge_io, "load_light_field_with_info", load)
     monkeypatch.setattr(pl, "estimate_disparity", estimate)
     monkeypatch.setattr(pl, "write_outputs", write)
     return state
@@ -285,7 +286,7 @@ def test_huge_filter_bank_is_refused_before_loading(tmp_path, fake_pipeline):
     cfg.write_text("[edges]\nd_max_fallback = 1e6\n")
     res = depth(scene, "--out", tmp_path / "out", "--config", cfg)
     assert_clean_error(res, "d_max_fallback")
-    assert "more than the" in res.output
+    assert "d_max_fallback must be > 0 and <= 64" in res.output
     assert fake_pipeline.loads == 0
 
 
@@ -296,9 +297,12 @@ def test_huge_filter_bank_is_refused_by_the_api_before_allocating():
     from mvedge_jax.synthetic import default_light_field
 
     lf = default_light_field()
-    cfg = PipelineConfig(edges=EdgeConfig(d_max=1e6))
-    with pytest.raises(ConfigError, match=r"d_max = 1e\+06"):
-        estimate_disparity(lf, cfg)
+    # refused when the config is built, before anything is allocated
+    with pytest.raises(ValueError, match=r"EdgeConfig\.d_max must be .*<= 64"):
+        PipelineConfig(edges=EdgeConfig(d_max=1e6))
+    # a bank within the bounds that would still not fit is refused by the memory check
+    with pytest.raises(ConfigError):
+        estimate_disparity(lf, PipelineConfig(edges=EdgeConfig(n_filters=5_000_000)))
 
 
 # ---- loader faults through the CLI ----------------------------------------------------------

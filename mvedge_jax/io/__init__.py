@@ -12,6 +12,7 @@ from ._colmap import ColmapPoints as ColmapPoints
 from ._colmap import read_colmap_binary as read_colmap_binary
 from ._colmap import read_colmap_model as read_colmap_model
 from ._colmap import read_colmap_text as read_colmap_text
+from ._colmap import rotmat_to_qvec as rotmat_to_qvec
 from ._colmap import write_colmap_binary as write_colmap_binary
 from ._colmap import write_colmap_text as write_colmap_text
 from ._grid import read_view_grid as read_view_grid

@@ -12,6 +12,7 @@ from ._chain import edges_stage as edges_stage
 from ._chain import estimate_disparity_arrays as estimate_disparity_arrays
 from ._chain import reconstruct_stage as reconstruct_stage
 from ._chain import surface_stage as surface_stage
+from ._checks import check_memory_before_loading as check_memory_before_loading
 from ._compile import STAGE_CACHE as STAGE_CACHE
 from ._compile import StageCache as StageCache
 from ._config import CONFIG_TABLES as CONFIG_TABLES

@@ -11,9 +11,7 @@ import os
 import equinox as eqx
 import numpy as np
 
-from ..edges import EdgeConfig
-from ..edges._bank import bank_width
-from ..edges._pipeline import resolve_d_max
+from ..edges import EdgeConfig, bank_width, resolve_d_max
 
 
 class ConfigError(ValueError):

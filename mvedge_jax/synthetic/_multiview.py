@@ -19,14 +19,16 @@ import os
 
 import numpy as np
 
-from ..io import write_colmap_text, write_pfm, write_png
-from ..io._colmap import (
+from ..io import (
     ColmapCamera,
     ColmapImage,
     ColmapModel,
     ColmapPoints,
     rotmat_to_qvec,
     write_colmap_binary,
+    write_colmap_text,
+    write_pfm,
+    write_png,
 )
 
 _N_WAVES = 5

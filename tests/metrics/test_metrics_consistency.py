@@ -92,6 +92,6 @@ def test_jit_traced_target_and_bad_inputs(gts):
     with pytest.raises(ValueError, match=r"\(U, V, H, W\)"):
         view_consistency(np.zeros((3, 8, 8)))
     with pytest.raises(ValueError, match="outside"):
-        view_consistency(np.zeros((3, 3, 8, 8)), (3, 0))
+        view_consistency(np.zeros((3, 3, 8, 8)), target=(3, 0))
     with pytest.raises(ValueError, match="view_mask"):
         view_consistency(np.zeros((3, 3, 8, 8)), view_mask=np.ones((3, 4), bool))
