@@ -110,7 +110,7 @@ def test_chain_gradient_matches_finite_differences(chain, path):
     assert abs(ad - fd) <= RTOL * max(abs(ad), abs(fd)), f"{path}: ad {ad:.6e} fd {fd:.6e}"
 
 
-@pytest.mark.parametrize("path", ["edges.presmooth_sigma", "edges.edge_shift"])
+@pytest.mark.parametrize("path", ["edges.presmooth_sigma"])
 def test_hard_edge_labels_gradient_matches_finite_differences(scene, path):
     """The default (hard) labels are piecewise smooth: where no discrete choice flips, their
     gradient is exact."""

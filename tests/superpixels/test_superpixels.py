@@ -179,8 +179,8 @@ def test_superpixels_bad_input(scene):
     lf, _, edges, offset = scene
     with pytest.raises(ValueError, match="surface_offset"):
         superpixels(lf, CFG, edges=edges, surface_offset=offset[:3])
-    bad = lf.__class__(views=lf.views.at[0, 0, 0, 0, 0].set(jnp.nan), view_mask=lf.view_mask)
-    with pytest.raises(ValueError, match="NaN"):
+    with pytest.raises(ValueError, match="NaN"):  # the LightField contract refuses NaN views
+        bad = lf.__class__(views=lf.views.at[0, 0, 0, 0, 0].set(jnp.nan), view_mask=lf.view_mask)
         superpixels(bad, CFG, edges=edges, surface_offset=offset)
     with pytest.raises(ValueError, match="shape"):
         kmeans_superpixels(lf, np.zeros((3, 3)), CFG)
