@@ -127,7 +127,7 @@ def estimate_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=compile_total,
-        diagnostics=diagnose(lf, config, edges, surface, rec.disparity),
+        diagnostics=diagnose(lf, config, edges, surface, rec.disparity, d_max=d_max),
     )
 
 
