@@ -514,6 +514,19 @@ def main(argv=None) -> int:
         match="narrower than its ground truth",
     )
     s = fresh()
+    (s / "parameters.cfg").write_text(
+        "[extrinsics]\nnum_cams_x = 5\nnum_cams_y = 5\n\n[meta]\ndisp_min = -0.1\ndisp_max = 0.1\n"
+    )
+    (s / "gt_disp_lowres.pfm").unlink()  # nothing to compare the range with but the labels
+    output_holder[0] = s.parent.parent / "out"
+    run_error(
+        "parameters.cfg range narrower than the scene, no ground truth",
+        s,
+        s.parent.parent / "out",
+        expect="warn",
+        match="probably wider than the one used",
+    )
+    s = fresh()
     for p in s.glob("input_Cam*.png"):
         cv2.imwrite(str(p), np.full((64, 64, 3), 128, np.uint8))
     run_error(

@@ -17,7 +17,7 @@ from ..lightfield import LightField
 from ..reconstruct import Reconstruction, propagate, select_centre, sharpen
 from ..surface import SurfaceResult
 from ._chain import edges_stage, reconstruct_stage, surface_stage
-from ._checks import check_compiled_memory, check_memory, diagnose
+from ._checks import check_compiled_memory, check_memory, check_solver, diagnose
 from ._compile import STAGE_CACHE
 from ._config import PipelineConfig
 
@@ -129,6 +129,16 @@ def estimate_disparity(
         compile_seconds=compile_total,
         diagnostics=diagnose(lf, config, edges, surface, rec.disparity, d_max=d_max),
     )
+
+
+def _optimize_diagnostics(diagnostics: dict, residuals, rtol: float) -> dict:
+    """``diagnostics`` with the status of the optimisation's Poisson solves (the worst
+    relative residual over its steps) under ``solver["optimize"]``, and its warning."""
+    status, more = check_solver("optimize", residuals, rtol)
+    out = dict(diagnostics)
+    out["warnings"] = list(out.get("warnings", [])) + more
+    out["solver"] = {**out.get("solver", {}), "optimize": status}
+    return out
 
 
 def cross_hair_others(
@@ -336,7 +346,9 @@ def optimize_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=result.compile_seconds + compile_seconds,
-        diagnostics=result.diagnostics,
+        diagnostics=_optimize_diagnostics(
+            result.diagnostics, hist["solver_residual"], float(opt.model.solver.rtol)
+        ),
     )
     info = {
         "optimize_seconds": optimize_seconds,

@@ -22,6 +22,7 @@ from mvedge_jax.pipeline import (
     optimize_steps,
     write_outputs,
 )
+from mvedge_jax.pipeline._driver import _optimize_diagnostics
 from mvedge_jax.reconstruct import sharpen
 from mvedge_jax.synthetic import make_scene
 
@@ -61,6 +62,9 @@ def test_optimize_returns_a_finite_result_for_every_view(api_run):
     assert 0 < info["n_points"] <= int(res.edges.valid.sum())
     assert info["overflow"] == 0
     assert info["optimize_seconds"] > 0 and info["propagate_seconds"] > 0
+    # the optimisation's Poisson solves are reported beside the Ch. 6 stages'
+    assert new.diagnostics["solver"]["optimize"]["status"] == "converged"
+    assert new.diagnostics["solver"]["surface"] == res.diagnostics["solver"]["surface"]
 
 
 def test_optimize_merges_with_the_initial_map(api_run):
@@ -295,3 +299,16 @@ def test_optimize_backgammon_target(data_dir):
     assert after["badpix_0.01"] < before["badpix_0.01"] + 6.0, (before, after)
     assert after_fine["badpix_0.01"] < before["badpix_0.01"], (before, after_fine)
     assert after_fine["badpix_0.07"] < before["badpix_0.07"], (before, after_fine)
+
+
+def test_optimize_diagnostics_report_unconverged_and_non_finite_solves():
+    base = {"warnings": ["w"], "solver": {"surface": {"status": "converged"}}}
+    ok = _optimize_diagnostics(base, np.array([1e-7, 5e-7]), 1e-6)
+    assert ok["solver"]["optimize"] == {"status": "converged", "residual_max": 5e-7}
+    assert ok["warnings"] == ["w"] and base["warnings"] == ["w"]  # the input is not modified
+    slow = _optimize_diagnostics(base, np.array([1e-7, 3e-3]), 1e-6)
+    assert slow["solver"]["optimize"]["status"] == "max-steps"
+    assert "optimize solve did not converge" in slow["warnings"][-1]
+    bad = _optimize_diagnostics(base, np.array([np.nan]), 1e-6)
+    assert bad["solver"]["optimize"]["status"] == "non-finite"
+    assert bad["solver"]["surface"] == {"status": "converged"}
