@@ -164,23 +164,54 @@ def photometric_terms(
     def per_view(view, off):
         warped = backward_warp(view, d, off)
         m = occlusion_mask(d, off, tolerance=config.occlusion_tolerance).astype(d.dtype)
-        l1 = jnp.mean(jnp.abs(centre - warped), axis=-1)
-        dssim = jnp.mean(ssim_dissimilarity(centre, warped), axis=-1)
-        return l1 * m, dssim * m, m
+        return masked_view_errors(centre, warped, m)
 
-    l1, dssim, m = jax.vmap(per_view)(others, offsets)
-    count = jnp.sum(m, axis=0)
-    norm = 1.0 / (count + jnp.asarray(config.eps, d.dtype))
+    return combine_view_errors(*jax.vmap(per_view)(others, offsets), d, centre, config)
+
+
+def masked_view_errors(
+    reference: Float[Array, "H W 3"], warped: Float[Array, "H W 3"], mask: Float[Array, "H W"]
+) -> tuple[Array, Array, Array]:
+    """Per-pixel colour L1 and SSIM dissimilarity (channel means) of one warped view against
+    the reference, times its visibility ``mask`` ``(H, W)``: ``(l1, dssim, mask)``."""
+    l1 = jnp.mean(jnp.abs(reference - warped), axis=-1)
+    dssim = jnp.mean(ssim_dissimilarity(reference, warped), axis=-1)
+    return l1 * mask, dssim * mask, mask
+
+
+def combine_view_errors(
+    l1: Float[Array, "K H W"],
+    dssim: Float[Array, "K H W"],
+    mask: Float[Array, "K H W"],
+    disparity: Float[Array, "H W"],
+    reference: Float[Array, "H W 3"],
+    config: LossConfig,
+) -> dict[str, Array]:
+    """The terms of eq 7.16 from the masked per-view errors of `masked_view_errors`: E is the
+    mean over the views that see a pixel (eq 7.15); see `photometric_terms` for the keys."""
+    count = jnp.sum(mask, axis=0)
+    norm = 1.0 / (count + jnp.asarray(config.eps, disparity.dtype))
     error = jnp.sum(l1, axis=0) * norm
     e_ssim = jnp.sum(dssim, axis=0) * norm
     return {
         "photometric": jnp.mean(error),
         "ssim": jnp.mean(e_ssim),
-        "smooth": edge_aware_smoothness(d, centre, config.edge_sharpness),
+        "smooth": edge_aware_smoothness(disparity, reference, config.edge_sharpness),
         "error_gradient": _grad_abs(error),
         "error": error,
         "mask_count": count,
     }
+
+
+def weighted_terms(terms: dict[str, Array], config: LossConfig) -> Array:
+    """Eq 7.16's weighted sum of `photometric_terms` (or `multiview_photometric_terms`):
+    ``mean(E) + w_ssim E_SSIM + w_s E_S - w_g mean|∇E|``."""
+    return (
+        config.photometric * terms["photometric"]
+        + config.ssim * terms["ssim"]
+        + config.smooth * terms["smooth"]
+        - config.gradient_reward * terms["error_gradient"]
+    )
 
 
 def self_supervised_loss(
@@ -194,13 +225,7 @@ def self_supervised_loss(
 
     Args and references: see `photometric_terms`.
     """
-    t = photometric_terms(disparity, centre, others, offsets, config)
-    return (
-        config.photometric * t["photometric"]
-        + config.ssim * t["ssim"]
-        + config.smooth * t["smooth"]
-        - config.gradient_reward * t["error_gradient"]
-    )
+    return weighted_terms(photometric_terms(disparity, centre, others, offsets, config), config)
 
 
 def supervised_loss(

@@ -17,10 +17,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..io import ColmapCamera, ColmapImage, ColmapModel
-from ..lightfield import ssim_dissimilarity
-from ._loss import LossConfig, _grad_abs, edge_aware_smoothness
+from ._loss import LossConfig, combine_view_errors, masked_view_errors, weighted_terms
 from ._model import DiffParams, predict
-from ._optimize import _DEFAULT_OPTIMIZE, BLOCKS, OptimizeConfig, _adam
+from ._optimize import _DEFAULT_OPTIMIZE, BLOCKS, OptimizeConfig, adam_block_update, adam_reset
 
 _DEFAULT_LOSS = LossConfig()
 
@@ -451,23 +450,9 @@ def multiview_photometric_terms(
         m = inside * multiview_occlusion_mask(
             d, cameras, i, view.shape[:2], tolerance=config.occlusion_tolerance
         ).astype(d.dtype)
-        l1 = jnp.mean(jnp.abs(ref - warped), axis=-1)
-        dssim = jnp.mean(ssim_dissimilarity(ref, warped), axis=-1)
-        return l1 * m, dssim * m, m
+        return masked_view_errors(ref, warped, m)
 
-    l1, dssim, m = jax.vmap(per_view)(srcs, jnp.arange(S))
-    count = jnp.sum(m, axis=0)
-    norm = 1.0 / (count + jnp.asarray(config.eps, d.dtype))
-    error = jnp.sum(l1, axis=0) * norm
-    e_ssim = jnp.sum(dssim, axis=0) * norm
-    return {
-        "photometric": jnp.mean(error),
-        "ssim": jnp.mean(e_ssim),
-        "smooth": edge_aware_smoothness(d, ref, config.edge_sharpness),
-        "error_gradient": _grad_abs(error),
-        "error": error,
-        "mask_count": count,
-    }
+    return combine_view_errors(*jax.vmap(per_view)(srcs, jnp.arange(S)), d, ref, config)
 
 
 def multiview_loss(
@@ -481,12 +466,8 @@ def multiview_loss(
 
     Args and references: see `multiview_photometric_terms`.
     """
-    t = multiview_photometric_terms(label, reference, sources, cameras, config)
-    return (
-        config.photometric * t["photometric"]
-        + config.ssim * t["ssim"]
-        + config.smooth * t["smooth"]
-        - config.gradient_reward * t["error_gradient"]
+    return weighted_terms(
+        multiview_photometric_terms(label, reference, sources, cameras, config), config
     )
 
 
@@ -503,23 +484,9 @@ def _mv_step(params, states, block, lr, x0, valid, reference, sources, cameras, 
         return multiview_loss(pred.disparity, reference, sources, cameras, loss), pred
 
     (loss, pred), grads = jax.value_and_grad(loss_fn, has_aux=True)(params)
-    ok = jnp.isfinite(loss)
-    new_params, new_states = params, []
-    for i, name in enumerate(BLOCKS):
-        sub, g = getattr(params, name), getattr(grads, name)
-        g = jnp.where(jnp.isfinite(g), g, 0.0)
-        upd, st = _adam.update(g, states[i])
-        active = ok & (block == i)
-        new_params = eqx.tree_at(
-            lambda q, n=name: getattr(q, n),
-            new_params,
-            jnp.where(active, sub - lr.astype(sub.dtype) * upd, sub),
-        )
-        new_states.append(
-            jax.tree.map(lambda a, b, act=active: jnp.where(act, a, b), st, states[i])
-        )
+    new_params, new_states = adam_block_update(params, grads, states, block, lr, jnp.isfinite(loss))
     info = {"loss": loss, "solver_iterations": pred.solve.iterations}
-    return new_params, tuple(new_states), pred.disparity, info
+    return new_params, new_states, pred.disparity, info
 
 
 def optimize_multiview(
@@ -580,13 +547,11 @@ def optimize_multiview(
     hist: dict[str, list] = {
         k: [] for k in ("loss", "pass", "block", "solver_iterations", "seconds")
     }
-    states = tuple(_adam.init(getattr(params, name)) for name in BLOCKS)
+    states = adam_reset(params)
     step = 0
     for k, block, lr in config.schedule():
         b = BLOCKS.index(block)
-        states = tuple(
-            _adam.init(getattr(params, block)) if i == b else st for i, st in enumerate(states)
-        )
+        states = adam_reset(params, states, block)
         bi = jnp.asarray(b, jnp.int32)
         for _ in range(config.iterations):
             t0 = time.perf_counter()

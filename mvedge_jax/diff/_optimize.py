@@ -115,18 +115,7 @@ def _step(params: DiffParams, states, block, lr, x0, valid, data: Data, config: 
         return objective(pred.disparity, data, config.loss), pred
 
     (loss, pred), grads = jax.value_and_grad(loss_fn, has_aux=True)(params)
-    ok = jnp.isfinite(loss)
-    new_params, new_states = params, []
-    for i, name in enumerate(BLOCKS):
-        sub, g = getattr(params, name), getattr(grads, name)
-        g = jnp.where(jnp.isfinite(g), g, 0.0)
-        upd, st = _adam.update(g, states[i])
-        active = ok & (block == i)
-        new_sub = jnp.where(active, sub - lr.astype(sub.dtype) * upd, sub)
-        new_params = eqx.tree_at(lambda q, n=name: getattr(q, n), new_params, new_sub)
-        new_states.append(
-            jax.tree.map(lambda a, b, act=active: jnp.where(act, a, b), st, states[i])
-        )
+    new_params, new_states = adam_block_update(params, grads, states, block, lr, jnp.isfinite(loss))
     mse = jnp.zeros((), pred.disparity.dtype)
     if data.target is not None:
         err = (pred.disparity - data.target) ** 2
@@ -142,7 +131,39 @@ def _step(params: DiffParams, states, block, lr, x0, valid, data: Data, config: 
         "solver_residual": pred.solve.residual,
         "overflow": pred.rendered.overflow,
     }
-    return new_params, tuple(new_states), pred.disparity, info
+    return new_params, new_states, pred.disparity, info
+
+
+def adam_reset(params: DiffParams, states=None, block: str | None = None):
+    """Fresh Adam states: for every block (``states`` None), or for ``block`` alone (the
+    others kept), as at the start of each turn of the schedule."""
+    if states is None:
+        return tuple(_adam.init(getattr(params, name)) for name in BLOCKS)
+    return tuple(
+        _adam.init(getattr(params, name)) if name == block else st
+        for name, st in zip(BLOCKS, states, strict=True)
+    )
+
+
+def adam_block_update(params: DiffParams, grads: DiffParams, states, block, lr, ok):
+    """Adam on the block ``BLOCKS[block]`` alone (traced ``block``; ``-1`` changes nothing).
+
+    Every block's Adam state sees its gradient (non-finite entries zeroed), but only the
+    active block's parameters and state change, and nothing changes where ``ok`` is False
+    (a non-finite loss). Returns ``(params, states)`` with ``states`` a tuple per block.
+    """
+    new_params, new_states = params, []
+    for i, name in enumerate(BLOCKS):
+        sub, g = getattr(params, name), getattr(grads, name)
+        g = jnp.where(jnp.isfinite(g), g, 0.0)
+        upd, st = _adam.update(g, states[i])
+        active = ok & (block == i)
+        new_sub = jnp.where(active, sub - lr.astype(sub.dtype) * upd, sub)
+        new_params = eqx.tree_at(lambda q, n=name: getattr(q, n), new_params, new_sub)
+        new_states.append(
+            jax.tree.map(lambda a, b, act=active: jnp.where(act, a, b), st, states[i])
+        )
+    return new_params, tuple(new_states)
 
 
 def params_from_edges(
@@ -282,13 +303,11 @@ def optimize(
         )
     }
     step = 0
-    states = tuple(_adam.init(getattr(params, name)) for name in BLOCKS)
+    states = adam_reset(params)
     for k, block, lr in config.schedule():
         b = BLOCKS.index(block)
         # a fresh Adam state for every block turn
-        states = tuple(
-            _adam.init(getattr(params, block)) if i == b else st for i, st in enumerate(states)
-        )
+        states = adam_reset(params, states, block)
         bi = jnp.asarray(b, jnp.int32)
         for _ in range(config.iterations):
             t0 = time.perf_counter()
