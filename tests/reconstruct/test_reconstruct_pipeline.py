@@ -70,10 +70,10 @@ def test_hyperparameter_sweep_does_not_recompile(small_scene):
     cfg0 = ReconstructConfig(sharpen=no_refine)
 
     @jax.jit
-    def run(omega, epi_c):
+    def run(omega, c):
         traces.append(1)
         cfg = ReconstructConfig(
-            centre=CentreConfig(omega=omega), epi=EpiConfig(c=epi_c), sharpen=no_refine
+            centre=CentreConfig(omega=omega), epi=EpiConfig(c=c), sharpen=no_refine
         )
         return reconstruct(lf.views, edges, surface, cfg).disparity
 
