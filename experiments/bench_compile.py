@@ -6,7 +6,7 @@ of compiled stages is empty and only JAX's persistent compilation cache carries 
 1. ``cold``: an empty persistent cache: `estimate_disparity` compiles every stage.
 2. ``warm``: a new process with the cache of phase 1: compilation reads the cache.
 3. Within the warm process, a second call with a new hyperparameter value
-   (``reconstruct.omega`` and ``edges.presmooth_sigma`` changed): no recompilation.
+   (``reconstruct.centre.omega`` and ``edges.filter.presmooth_sigma`` changed): no recompilation.
 
 Usage::
 
@@ -50,8 +50,8 @@ def _phase(scene: str) -> dict:
     changed = replace_paths(
         config,
         {
-            "reconstruct.omega": jnp.asarray(120.0),
-            "edges.presmooth_sigma": jnp.asarray(0.9),
+            "reconstruct.centre.omega": jnp.asarray(120.0),
+            "edges.filter.presmooth_sigma": jnp.asarray(0.9),
         },
     )
     t0 = time.perf_counter()

@@ -33,32 +33,47 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from mvedge_jax.edges import EdgeConfig, detect_edges, point_errors, render_overlay  # noqa: E402
+from mvedge_jax.edges import (  # noqa: E402
+    EdgeConfig,
+    FilterConfig,
+    detect_edges,
+    point_errors,
+    render_overlay,
+)
+from mvedge_jax.pipeline import PipelineConfig, with_values  # noqa: E402
 
 
 def steps(default: EdgeConfig) -> list[tuple[str, dict]]:
-    """(name, EdgeConfig overrides) of each row of the table.
+    """(name, EdgeConfig overrides by dotted path, e.g. ``"label.nms"``) of each row of the
+    table.
 
     The first rows add the stages of the default configuration one at a time (thesis-style
     detection first); the last rows add each remaining optional stage to the default alone.
     """
-    off = dict(outliers=False, trilateral=False)
-    thesis = dict(off, nms=True, lambda_frac=0.2, min_ratio=0.0, subpixel="none")
-    dense = dict(off, nms=False, lambda_frac=0.0, subpixel="variance")
+    off = {"outliers.enabled": False, "refine.trilateral": False}
+    thesis = {
+        **off,
+        "label.nms": True,
+        "label.lambda_frac": 0.2,
+        "label.min_ratio": 0.0,
+        "label.subpixel": "none",
+    }
+    dense = {**off, "label.nms": False, "label.lambda_frac": 0.0, "label.subpixel": "variance"}
+    variance = {**thesis, "label.subpixel": "variance"}
     return [
         ("raw: Alg.1 + NMS + line fit (λ=0.2h)", dict(thesis)),
-        ("+ parabolic sub-pixel", dict(thesis, subpixel="parabolic")),
-        ("+ colour-variance search", dict(thesis, subpixel="variance")),
-        ("+ colour std filter (0.03)", dict(thesis, subpixel="variance", max_colour_std=0.03)),
-        ("dense candidates, λ=0, no filter", dict(dense, min_ratio=0.0)),
+        ("+ parabolic sub-pixel", {**thesis, "label.subpixel": "parabolic"}),
+        ("+ colour-variance search", variance),
+        ("+ colour std filter (0.03)", {**variance, "label.max_colour_std": 0.03}),
+        ("dense candidates, λ=0, no filter", {**dense, "label.min_ratio": 0.0}),
         ("+ distinct-minimum filter (ratio 2)", dict(dense)),
-        ("+ trilateral filter (eq 4.6) = default", dict(dense, trilateral=True)),
-        ("default + outlier rejection (4.1.3)", dict(outliers=True)),
-        ("default + gradient alignment (eq 4.3)", dict(gradient_alignment=True)),
-        ("default + drop invisible (eq 4.4)", dict(drop_invisible=True)),
-        ("default + entropy search (eq 4.5)", dict(entropy_search=True)),
-        ("default + multi-scale (4.1.4)", dict(multiscale=True)),
-        ("default, trilateral radius 10", dict(trilateral_radius=10)),
+        ("+ trilateral filter (eq 4.6) = default", {**dense, "refine.trilateral": True}),
+        ("default + outlier rejection (4.1.3)", {"outliers.enabled": True}),
+        ("default + gradient alignment (eq 4.3)", {"refine.gradient_alignment": True}),
+        ("default + drop invisible (eq 4.4)", {"refine.drop_invisible": True}),
+        ("default + entropy search (eq 4.5)", {"refine.entropy_search": True}),
+        ("default + multi-scale (4.1.4)", {"refine.multiscale": True}),
+        ("default, trilateral radius 10", {"refine.trilateral_radius": 10}),
     ]
 
 
@@ -157,7 +172,11 @@ def main(scenes, json_out, overlays, with_steps, d_max, views, cache):
     for scene in scenes:
         kw = {"views": views} if views else {}
         lf = load_light_field(scene, **kw)
-        default = EdgeConfig() if (d_max is None or lf.disparity_range) else EdgeConfig(d_max=d_max)
+        default = (
+            EdgeConfig()
+            if (d_max is None or lf.disparity_range)
+            else EdgeConfig(filter=FilterConfig(d_max=d_max))
+        )
         U, V = lf.grid
         H, W = lf.size
         print(f"\n=== {lf.name}: {U}x{V} views of {H}x{W}, disparity range {lf.disparity_range}")
@@ -165,7 +184,7 @@ def main(scenes, json_out, overlays, with_steps, d_max, views, cache):
         rows = []
         if with_steps:
             for name, over in steps(default):
-                cfg = eqx_replace(default, **over)
+                cfg = replaced(default, over)
                 e, sec, comp, cpu = run_config(lf, cfg, key)
                 r = {"step": name, **evaluate(lf, e), "seconds": sec, "compile_seconds": comp}
                 r["cpu_seconds"] = cpu
@@ -192,13 +211,11 @@ def main(scenes, json_out, overlays, with_steps, d_max, views, cache):
         print(f"wrote {json_out}")
 
 
-def eqx_replace(cfg: EdgeConfig, **kw) -> EdgeConfig:
-    """A copy of ``cfg`` with some fields replaced (re-validated)."""
-    import dataclasses
-
-    fields = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
-    fields.update(kw)
-    return EdgeConfig(**fields)
+def replaced(cfg: EdgeConfig, overrides: dict) -> EdgeConfig:
+    """A copy of ``cfg`` with the fields at the dotted paths of ``overrides`` (relative to
+    `EdgeConfig`, e.g. ``"label.nms"``) replaced and re-validated (`with_values`)."""
+    values = {f"edges.{path}": value for path, value in overrides.items()}
+    return with_values(PipelineConfig(edges=cfg), values).edges
 
 
 if __name__ == "__main__":

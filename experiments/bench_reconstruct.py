@@ -37,7 +37,10 @@ import numpy as np  # noqa: E402
 from mvedge_jax.edges import detect_edges  # noqa: E402
 from mvedge_jax.io import read_hci4d  # noqa: E402
 from mvedge_jax.reconstruct import (  # noqa: E402
+    EpiConfig,
+    FillConfig,
     ReconstructConfig,
+    SharpenConfig,
     centre_disparity,
     oracle_edges,
     photo_refine,
@@ -55,7 +58,11 @@ SCENES = {
 }
 CONFIGS = {
     "default": ReconstructConfig(),
-    "thesis": ReconstructConfig(refine=False, merge="mean", epi_photo_sigma=1e6),
+    "thesis": ReconstructConfig(
+        sharpen=SharpenConfig(refine=False),
+        fill=FillConfig(merge="mean"),
+        epi=EpiConfig(photo_sigma=1e6),
+    ),
 }
 
 

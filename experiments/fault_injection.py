@@ -536,23 +536,23 @@ def main(argv=None) -> int:
     # -- 4. config faults (checked before the scene is loaded)
     configs = {
         'bool as the string "false"': (
-            '[edges]\nnms = "false"\n',
-            "edges.nms expects true or false",
+            '[edges.label]\nnms = "false"\n',
+            "edges.label.nms expects true or false",
         ),
         "array where a number is expected": (
-            "[edges]\npresmooth_sigma = [0.8, 0.9]\n",
-            "edges.presmooth_sigma expects a number",
+            "[edges.filter]\npresmooth_sigma = [0.8, 0.9]\n",
+            "edges.filter.presmooth_sigma expects a number",
         ),
         "float where an int is expected": (
-            "[edges]\nn_filters = 61.5\n",
-            "edges.n_filters expects an integer",
+            "[edges.filter]\nn_filters = 61.5\n",
+            "edges.filter.n_filters expects an integer",
         ),
         "unknown key": ("[surface]\nsmoothness = 2\n", "unknown key surface.smoothness"),
         "unknown table": ("[edge]\nn_filters = 61\n", "unknown config tables"),
         "nan value": ("[surface]\noffset = nan\n", "surface.offset must be a finite number"),
         "out-of-range value": ("[optimize]\niterations = -1\n", "iterations must be an int >= 0"),
-        "d_max_fallback = 1e6": ("[edges]\nd_max_fallback = 1e6\n", "d_max_fallback"),
-        "d_max = 1e6": ("[edges]\nd_max = 1e6\n", "more than the"),
+        "d_max_fallback = 1e6": ("[edges.filter]\nd_max_fallback = 1e6\n", "d_max_fallback"),
+        "d_max = 1e6": ("[edges.filter]\nd_max = 1e6\n", "more than the"),
         "invalid TOML": ("[edges\nn_filters = 61\n", "is not valid TOML"),
     }
     for name, (text, match) in configs.items():

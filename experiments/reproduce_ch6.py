@@ -29,16 +29,15 @@ centre view's MSE×100 by less than 0.5 % on every scene, experiments/error_spli
 - ``--sensitivity``: one parameter at a time, each value of `SENSITIVITY`; prints per scene
   the MSE×100 ratio to the default and the geometric mean over scenes.
 - ``--loo``: every combination of `LOO_GRID` (or of ``--grid``: array fields of
-  `ReconstructConfig`); for each held-out scene the combination with the
-  lowest geometric-mean MSE×100 ratio to the default over the OTHER scenes is picked and its
-  held-out MSE×100 and BadPix(0.07) are reported beside the default's (the leave-one-out
-  table).
+  `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``); for each held-out scene the
+  combination with the lowest geometric-mean MSE×100 ratio to the default over the OTHER
+  scenes is picked and its held-out MSE×100 and BadPix(0.07) are reported beside the
+  default's (the leave-one-out table).
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import itertools
 import json
 import os
@@ -62,6 +61,8 @@ from mvedge_jax.pipeline import (  # noqa: E402
     PipelineConfig,
     config_from_dict,
     estimate_disparity,
+    hyperparameter_paths,
+    with_values,
     write_outputs,
 )
 from mvedge_jax.reconstruct import ReconstructConfig, centre_disparity, sharpen  # noqa: E402
@@ -82,26 +83,34 @@ THESIS = {
 }
 # Targets of the main-job issue: MSE×100, BadPix(0.07).
 TARGETS = {"backgammon": (1.2, 1.5), "antinous": (5.0, 10.0)}
-# Candidate values (one parameter at a time) of the centre-view defaults of ReconstructConfig.
+# Candidate values (one parameter at a time) of the centre-view defaults of ReconstructConfig
+# (dotted paths relative to it).
 SENSITIVITY = {
-    "omega": (50.0, 450.0),
-    "a": (1.5, 4.5),
-    "centre_c": (0.3, 3.0),
-    "centre_eps": (3e-4, 3e-3),
-    "conf_beta": (3.0, 30.0),
-    "offset_scale": (0.5, 1.5),
-    "wmf_sigma": (0.025, 0.1),
-    "refine_jump": (0.1, 0.4),
-    "matte_jump": (0.1, 0.4),
-    "matte_min_separation": (0.05, 0.2),
+    "centre.omega": (50.0, 450.0),
+    "centre.a": (1.5, 4.5),
+    "centre.c": (0.3, 3.0),
+    "centre.eps": (3e-4, 3e-3),
+    "centre.conf_beta": (3.0, 30.0),
+    "centre.offset_scale": (0.5, 1.5),
+    "sharpen.wmf_sigma": (0.025, 0.1),
+    "sharpen.refine_jump": (0.1, 0.4),
+    "sharpen.matte_jump": (0.1, 0.4),
+    "sharpen.matte_min_separation": (0.05, 0.2),
 }
 # The leave-one-out grid: the thresholds that decide where the sharpening acts (the stage that
 # changes the error most on every scene, experiments/error_split.py; on slanted planes a
 # 7-px window spans more than 0.2 px of disparity, so the 0.2 thresholds act inside them).
 LOO_GRID = {
-    "refine_jump": (0.2, 0.4, 0.8),
-    "matte_jump": (0.2, 0.4, 0.8),
+    "sharpen.refine_jump": (0.2, 0.4, 0.8),
+    "sharpen.matte_jump": (0.2, 0.4, 0.8),
 }
+
+
+def replaced(values: dict) -> ReconstructConfig:
+    """The default `ReconstructConfig` with the fields at the dotted paths of ``values``
+    (relative to it, e.g. ``"centre.omega"``) replaced and validated (`with_values`)."""
+    full = {f"reconstruct.{path}": v for path, v in values.items()}
+    return with_values(PipelineConfig(), full).reconstruct
 
 
 def run_scene(lf, out_root: str | None, config: PipelineConfig | None = None) -> dict:
@@ -128,19 +137,6 @@ def run_scene(lf, out_root: str | None, config: PipelineConfig | None = None) ->
     return metrics
 
 
-# The ReconstructConfig fields the centre diffusion (eq 6.1) reads; the other swept fields act
-# in the sharpening only, so one diffusion per scene serves every value of them.
-CENTRE_FIELDS = (
-    "omega",
-    "a",
-    "lambda_e_max",
-    "offset_scale",
-    "centre_c",
-    "centre_eps",
-    "conf_beta",
-)
-
-
 @eqx.filter_jit
 def _diffuse(views, edges, surface, config):
     centre = views[views.shape[0] // 2, views.shape[1] // 2]
@@ -162,7 +158,9 @@ def _score_scenes(configs: dict, cache: Path | None) -> dict:
         diffused = {}
         t0 = time.perf_counter()
         for label, cfg in configs.items():
-            key = tuple(float(getattr(cfg, f)) for f in CENTRE_FIELDS)
+            # The centre diffusion (eq 6.1) reads the array fields of ``cfg.centre``; the other
+            # swept fields act in the sharpening only, so one diffusion serves all of them.
+            key = tuple(float(v) for v in jax.tree.leaves(cfg.centre))
             if key not in diffused:
                 diffused[key] = _diffuse(lf.views, edges, surface, cfg)
             m = depth_metrics(np.asarray(sharpen(lf.views, diffused[key], cfg)), gt)
@@ -182,7 +180,7 @@ def sensitivity(cache: Path | None) -> dict:
     configs = {"default": ReconstructConfig()}
     for name, values in SENSITIVITY.items():
         for v in values:
-            configs[f"{name}={v:g}"] = dataclasses.replace(ReconstructConfig(), **{name: v})
+            configs[f"{name}={v:g}"] = replaced({name: v})
     scores = _score_scenes(configs, cache)
     scenes = list(scores)
     head = f"{'config':<26}" + "".join(f"{s[:11]:>12}" for s in scenes) + f"{'geo-mean':>10}"
@@ -201,14 +199,17 @@ def sensitivity(cache: Path | None) -> dict:
 
 def parse_grid(text: str) -> dict[str, tuple[float, ...]]:
     """``"name=v1,v2;name2=v3,v4"`` → ``{name: (v1, v2), name2: (v3, v4)}`` (array fields of
-    `ReconstructConfig`)."""
+    `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``)."""
+    prefix = "reconstruct."
+    fields = {p.removeprefix(prefix) for p in hyperparameter_paths() if p.startswith(prefix)}
     grid = {}
     for part in text.split(";"):
         name, _, values = part.partition("=")
         name = name.strip()
-        if name not in ReconstructConfig.__dataclass_fields__ or not values:
+        if name not in fields or not values:
             raise ValueError(
-                f"bad grid entry {part!r}: use NAME=V1,V2 with a ReconstructConfig field"
+                f"bad grid entry {part!r}: use NAME=V1,V2 with a ReconstructConfig array field "
+                "(a dotted path such as sharpen.wmf_sigma)"
             )
         grid[name] = tuple(float(v) for v in values.split(","))
     return grid
@@ -221,9 +222,7 @@ def leave_one_out(cache: Path | None, grid: dict | None = None) -> dict:
     configs = {"default": ReconstructConfig()}
     for combo in combos:
         label = ", ".join(f"{n}={v:g}" for n, v in zip(names, combo, strict=True))
-        configs[label] = dataclasses.replace(
-            ReconstructConfig(), **dict(zip(names, combo, strict=True))
-        )
+        configs[label] = replaced(dict(zip(names, combo, strict=True)))
     scores = _score_scenes(configs, cache)
     scenes = list(scores)
     labels = [k for k in configs if k != "default"]
@@ -266,7 +265,9 @@ def main(argv=None) -> int:
     ap.add_argument("--loo", action="store_true", help="leave-one-scene-out table")
     ap.add_argument("--cache", help="folder of cached edges/surfaces (with --loo/--sensitivity)")
     ap.add_argument("--config", help="a TOML pipeline config (as `mvedge depth --config`)")
-    ap.add_argument("--grid", help="--loo grid, e.g. 'wmf_sigma=0.025,0.05;conf_beta=3,10'")
+    ap.add_argument(
+        "--grid", help="--loo grid, e.g. 'sharpen.wmf_sigma=0.025,0.05;centre.conf_beta=3,10'"
+    )
     args = ap.parse_args(argv)
     if args.sensitivity or args.loo:
         cache = Path(args.cache) if args.cache else None

@@ -1,15 +1,15 @@
 """Hyperparameter sweep of the thesis Ch. 6 reconstruction on a ground-truth scene (cf. Fig. 6.10).
 
 Usage:
-    python experiments/sweep_ch6.py SCENE_DIR --param omega --values 10,30,100,150,300,1000
-        [--param2 centre_c --values2 0.3,1,3] [--stage centre|full] [--scale 0.5]
+    python experiments/sweep_ch6.py SCENE_DIR --param centre.omega --values 10,30,100,150,300,1000
+        [--param2 centre.c --values2 0.3,1,3] [--stage centre|full] [--scale 0.5]
         [--batch-size B] [--out DIR] [--json OUT.json] [--force]
 
 Edge detection and surface vectors (thesis Ch. 4) run ONCE (`detect_edges`, `surface_vectors`:
 the first two stages of `estimate_disparity`, same defaults and key); then the swept
 stage is evaluated for every value (or every pair of values) of array leaves of
-`ReconstructConfig` (``omega``, ``a``, ``centre_c``, ``centre_eps``, ``epi_c``,
-``epi_data_weight``, …) without recompiling:
+`ReconstructConfig`, named by their dotted path in it (``centre.omega``, ``centre.a``,
+``centre.c``, ``centre.eps``, ``epi.c``, ``epi.data_weight``, …) without recompiling:
 
 - ``--stage centre`` (default): the centre-view diffusion `centre_disparity` (eqs 6.1–6.3),
   ``jax.vmap``-ed over the parameter values and compiled once ahead of time (``--batch-size B``
@@ -18,7 +18,8 @@ stage is evaluated for every value (or every pair of values) of array leaves of
   centre, refinement, weighted median, EPI inpainting, off-cross-hair views) ``vmap``-ed over
   the values in one compiled program (``--batch-size B``: ``lax.map``), sharded over devices
   when several exist; any differentiable or threshold field of the chain can be swept, named
-  by its dotted path (``edges.presmooth_sigma``; a bare name means ``reconstruct.<name>``).
+  by its dotted path (``edges.filter.presmooth_sigma``; a path that does not start with a
+  stage, such as ``centre.omega``, means ``reconstruct.<path>``).
   The number of XLA compilations is printed as evidence that it compiled once.
 
 Metrics are those of the centre view against its ground truth (`depth_metrics`). A table
@@ -89,15 +90,20 @@ class CompileCounter:
         return self.count, self.seconds
 
 
-def sweepable_params(config: ReconstructConfig | None = None) -> list[str]:
-    """Names of the scalar array leaves of `ReconstructConfig` (sweepable without recompiling)."""
-    config = ReconstructConfig() if config is None else config
-    names = []
-    for name in ReconstructConfig.__dataclass_fields__:
-        v = getattr(config, name)
-        if isinstance(v, jax.Array) and v.ndim == 0:
-            names.append(name)
-    return names
+_STAGES = ("edges", "surface", "reconstruct")
+
+
+def full_path(param: str) -> str:
+    """A dotted path of `PipelineConfig`: ``param`` itself when it starts with a stage name,
+    else ``reconstruct.<param>``."""
+    return param if param.split(".")[0] in _STAGES else f"reconstruct.{param}"
+
+
+def sweepable_params() -> list[str]:
+    """Dotted paths (relative to `ReconstructConfig`, e.g. ``centre.omega``) of its scalar
+    array leaves (sweepable without recompiling)."""
+    prefix = "reconstruct."
+    return [p.removeprefix(prefix) for p in hyperparameter_paths() if p.startswith(prefix)]
 
 
 def parse_values(text: str, param: str) -> np.ndarray:
@@ -114,17 +120,17 @@ def parse_values(text: str, param: str) -> np.ndarray:
         ) from err
     if not vals:
         raise ValueError(f"no values given for {param!r}: {text!r}")
-    stage, _, name = param.rpartition(".")
     for v in vals:  # raises ValueError on e.g. negative weights
-        with_values(PipelineConfig(), {f"{stage or 'reconstruct'}.{name}": v})
+        with_values(PipelineConfig(), {full_path(param): v})
     return np.asarray(vals, np.float64)
 
 
 def with_params(base: ReconstructConfig, names: tuple[str, ...], values) -> ReconstructConfig:
-    """``base`` with the leaves ``names`` replaced by ``values`` (arrays or tracers)."""
-    dtype = getattr(base, names[0]).dtype
+    """``base`` with the leaves at the dotted paths ``names`` replaced by ``values`` (arrays or
+    tracers)."""
+    dtype = get_path(base, names[0]).dtype
     return eqx.tree_at(
-        lambda c: tuple(getattr(c, n) for n in names),
+        lambda c: tuple(get_path(c, n) for n in names),
         base,
         tuple(jnp.asarray(v, dtype) for v in values),
     )
@@ -151,7 +157,7 @@ def sweep_centre(edges, surface, centre_view, base, names, grid, batch_size=None
             )
         return jax.vmap(one, in_axes=(0, None, None, None))(grid, edges, surface, centre_view)
 
-    dtype = getattr(base, names[0]).dtype
+    dtype = get_path(base, names[0]).dtype
     grid = np.asarray(grid, dtype)  # host-side cast: no extra XLA compilation
     t0 = time.perf_counter()
     compiled = jax.jit(all_values).lower(grid, edges, surface, centre_view).compile()
@@ -251,7 +257,9 @@ def _check_writable(path: Path, force: bool) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scene", help="scene folder with ground truth (any supported layout)")
-    ap.add_argument("--param", required=True, help="ReconstructConfig array leaf to sweep")
+    ap.add_argument(
+        "--param", required=True, help="ReconstructConfig array leaf to sweep (e.g. centre.omega)"
+    )
     ap.add_argument("--values", required=True, help="comma-separated values")
     ap.add_argument("--param2", help="optional second parameter (2-D sweep)")
     ap.add_argument("--values2", help="values of the second parameter")
@@ -273,7 +281,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--param2 and --values2 go together")
     if args.stage == "full":
         allowed = list(hyperparameter_paths())
-        params = [p if "." in p else f"reconstruct.{p}" for p in params]
+        params = [full_path(p) for p in params]
     else:
         allowed = sweepable_params()
     for p in params:
@@ -321,9 +329,7 @@ def main(argv: list[str] | None = None) -> int:
             f"edges + surface once: {time.perf_counter() - t0:.1f}s (incl. compilation), "
             f"{int(edges.valid.sum())} edge points"
         )
-    defaults = [
-        float(get_path(PipelineConfig(), p if "." in p else f"reconstruct.{p}")) for p in params
-    ]
+    defaults = [float(get_path(PipelineConfig(), full_path(p))) for p in params]
     base = ReconstructConfig()
 
     n_before, _ = counter.snapshot()
@@ -357,7 +363,7 @@ def main(argv: list[str] | None = None) -> int:
             "run_seconds": t_run,
         }
     else:
-        paths = tuple(p if "." in p else f"reconstruct.{p}" for p in params)
+        paths = tuple(full_path(p) for p in params)
         maps, seconds = sweep_full(lf, paths, grid, batch_size=args.batch_size or None)
         n_after, t_after = counter.snapshot()
         secs = np.full(K, seconds / K)

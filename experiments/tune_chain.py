@@ -15,7 +15,7 @@ takes seconds on a CPU; errors are in the pixels of the cropped light field.
 Example::
 
     python experiments/tune_chain.py --train synthetic:1 synthetic:2 --eval synthetic:3 \\
-        --fields reconstruct.omega surface.gradient_sigma reconstruct.epi_c --steps 10
+        --fields reconstruct.centre.omega surface.gradient_sigma reconstruct.epi.c --steps 10
 """
 
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main() -> None:
     parser.add_argument(
         "--fields",
         nargs="+",
-        default=["reconstruct.omega", "surface.gradient_sigma", "reconstruct.epi_c"],
+        default=["reconstruct.centre.omega", "surface.gradient_sigma", "reconstruct.epi.c"],
         help=f"differentiable fields, from: {' '.join(hyperparameter_paths(differentiable=True))}",
     )
     parser.add_argument("--steps", type=int, default=10)

@@ -231,8 +231,9 @@ def info(path: str, views, scale, transpose) -> None:
 
 def _config_from_file(path: str | None):
     """A `PipelineConfig` from a TOML file with optional ``[edges]``, ``[surface]``,
-    ``[reconstruct]`` and ``[optimize]`` tables (and sub-tables such as ``[optimize.loss]``) of
-    keyword arguments for the stage configs."""
+    ``[reconstruct]`` and ``[optimize]`` tables (and sub-tables for the nested configs, such as
+    ``[edges.filter]``, ``[reconstruct.centre]`` or ``[optimize.loss]``) of keyword arguments
+    for the configs."""
     from .pipeline import PipelineConfig, config_from_dict
 
     if path is None:
@@ -519,7 +520,8 @@ def _requested_views(info: LayoutInfo, lf: LightField):
 
 _CONFIG_HELP = (
     "TOML file with [edges], [surface], [reconstruct], [optimize] parameter tables "
-    "(sub-tables for nested configs, e.g. [optimize.loss])."
+    "(sub-tables for nested configs, e.g. [edges.filter], [reconstruct.centre], "
+    "[optimize.loss]; `mvedge config --dump` prints them all)."
 )
 _OPTIMIZE_HELP = (
     "Refine the result with the differentiable edge model (thesis Ch. 7: self-supervised "

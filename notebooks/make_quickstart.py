@@ -117,7 +117,7 @@ d_max = resolve_d_max(cfg.edges, lf.disparity_range)
 
 def centre_error(omega, views, gt):
     # the arrays are arguments, not closed-over constants (which XLA would constant-fold)
-    c = replace_paths(cfg, {"reconstruct.omega": omega})
+    c = replace_paths(cfg, {"reconstruct.centre.omega": omega})
     disp = estimate_disparity_arrays(views, c, key=key, d_max=d_max).disparity
     return 100.0 * jnp.mean((disp[rc, cc] - gt) ** 2)
 
@@ -126,7 +126,7 @@ data = (lf.views, lf.centre_gt)
 # grad: d(MSE×100)/dω; vmap: both for two values of ω in one compiled call
 value_and_grad = jax.value_and_grad(centre_error)
 batched = jax.jit(jax.vmap(value_and_grad, in_axes=(0, None, None)))
-omegas = jnp.array([50.0, float(cfg.reconstruct.omega)])
+omegas = jnp.array([50.0, float(cfg.reconstruct.centre.omega)])
 values, grads = batched(omegas, *data)
 for w, v, g in zip(omegas, values, grads, strict=True):
     print(f"vmap: ω = {float(w):g}: MSE×100 {float(v):.4f}, d(MSE×100)/dω = {float(g):.3e}")""",

@@ -15,14 +15,23 @@ PACKAGE = Path(mvedge_jax.__file__).resolve().parent
 
 #: The stable names of the top-level package.
 PUBLIC = (
+    "CentreConfig",
     "ChainOutput",
     "EdgeConfig",
+    "EdgeRefineConfig",
     "EdgeSet",
+    "EpiConfig",
+    "FillConfig",
+    "FilterConfig",
+    "LabelConfig",
     "LightField",
     "ModelConfig",
     "OptimizeConfig",
+    "OutlierConfig",
     "PipelineConfig",
     "ReconstructConfig",
+    "SelectConfig",
+    "SharpenConfig",
     "Result",
     "SurfaceConfig",
     "depth_metrics",

@@ -246,11 +246,19 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path, fake_pipeline):
 @pytest.mark.parametrize(
     ("text", "message"),
     [
-        ("[edges]\nnms = 'false'\n", "edges.nms expects true or false"),
-        ("[edges]\npresmooth_sigma = [1.0, 2.0]\n", "edges.presmooth_sigma expects a number"),
-        ("[edges]\nn_filters = 7.5\n", "edges.n_filters expects an integer"),
+        ("[edges.label]\nnms = 'false'\n", "edges.label.nms expects true or false"),
+        (
+            "[edges.filter]\npresmooth_sigma = [1.0, 2.0]\n",
+            "edges.filter.presmooth_sigma expects a number",
+        ),
+        ("[edges.filter]\nn_filters = 7.5\n", "edges.filter.n_filters expects an integer"),
         ("[surface]\nno_such_key = 1\n", "unknown key surface.no_such_key"),
-        ("[edges]\nd_max_fallback = nan\n", "edges.d_max_fallback must be a finite number"),
+        ("[reconstruct]\nomega = 1.0\n", "unknown key reconstruct.omega"),
+        ("[reconstruct.centre]\nno_such_key = 1\n", "unknown key reconstruct.centre.no_such_key"),
+        (
+            "[edges.filter]\nd_max_fallback = nan\n",
+            "edges.filter.d_max_fallback must be a finite number",
+        ),
         ("[optimize.model.render]\ntile_levels = [[64, 'x']]\n", "tile_levels[0][1]"),
     ],
 )
@@ -283,7 +291,7 @@ def test_unreadable_config_file(tmp_path, fake_pipeline, kind):
 def test_huge_filter_bank_is_refused_before_loading(tmp_path, fake_pipeline):
     scene = write_scene(tmp_path / "scene", U=9, V=9, size=16, drange=None)
     cfg = tmp_path / "big.toml"
-    cfg.write_text("[edges]\nd_max_fallback = 1e6\n")
+    cfg.write_text("[edges.filter]\nd_max_fallback = 1e6\n")
     res = depth(scene, "--out", tmp_path / "out", "--config", cfg)
     assert_clean_error(res, "d_max_fallback")
     assert "d_max_fallback must be > 0 and <= 64" in res.output
@@ -291,18 +299,19 @@ def test_huge_filter_bank_is_refused_before_loading(tmp_path, fake_pipeline):
 
 
 def test_huge_filter_bank_is_refused_by_the_api_before_allocating():
-    from mvedge_jax.edges import EdgeConfig
+    from mvedge_jax.edges import EdgeConfig, FilterConfig
     from mvedge_jax.pipeline import PipelineConfig, estimate_disparity
     from mvedge_jax.pipeline._checks import ConfigError
     from mvedge_jax.synthetic import default_light_field
 
     lf = default_light_field()
     # refused when the config is built, before anything is allocated
-    with pytest.raises(ValueError, match=r"EdgeConfig\.d_max must be .*<= 64"):
-        PipelineConfig(edges=EdgeConfig(d_max=1e6))
+    with pytest.raises(ValueError, match=r"FilterConfig\.d_max must be .*<= 64"):
+        PipelineConfig(edges=EdgeConfig(filter=FilterConfig(d_max=1e6)))
     # a bank within the bounds that would still not fit is refused by the memory check
     with pytest.raises(ConfigError):
-        estimate_disparity(lf, PipelineConfig(edges=EdgeConfig(n_filters=5_000_000)))
+        huge = EdgeConfig(filter=FilterConfig(n_filters=5_000_000))
+        estimate_disparity(lf, PipelineConfig(edges=huge))
 
 
 # ---- loader faults through the CLI ----------------------------------------------------------

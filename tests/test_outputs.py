@@ -132,6 +132,7 @@ def test_metrics_json_is_strict_and_has_provenance(written):
     assert cfg["_type"] == "PipelineConfig"
     assert set(cfg) >= {"edges", "surface", "reconstruct", "optimize"}
     assert cfg["reconstruct"]["_type"] == "ReconstructConfig"
+    assert cfg["reconstruct"]["centre"]["_type"] == "CentreConfig"
     assert m["seconds_total"] == 12.5 and m["seconds_per_stage"]["reconstruct"] == 1.0
     assert m["seconds_write"] > 0
     # noise 0.02 px: MSE×100 ≈ 100 · 0.02² = 0.04

@@ -6,6 +6,10 @@ from ._bank import filter_disparities as filter_disparities
 from ._bank import prewitt_bank as prewitt_bank
 from ._config import STRATEGIES as STRATEGIES
 from ._config import EdgeConfig as EdgeConfig
+from ._config import EdgeRefineConfig as EdgeRefineConfig
+from ._config import FilterConfig as FilterConfig
+from ._config import LabelConfig as LabelConfig
+from ._config import OutlierConfig as OutlierConfig
 from ._detect import detect_centre_row as detect_centre_row
 from ._detect import soft_detect as soft_detect
 from ._detect import soft_select as soft_select

@@ -34,10 +34,10 @@ def reject_outliers(
     """Keep-mask of the neighbour-count outlier test (eqs 4.1–4.2), per EPI direction.
 
     ``A(l_i)`` = lines of the same direction within a ``p x q`` window (``p, q`` =
-    ``outlier_window_frac`` of the width / height) whose filter label is within
-    ``outlier_label_tol`` of ``l_i``'s. With ``config.outlier_test = "count"`` (the thesis)
+    ``outliers.window_frac`` of the width / height) whose filter label is within
+    ``outliers.label_tol`` of ``l_i``'s. With ``config.outliers.test = "count"`` (the thesis)
     ``l_i`` is discarded when ``c_i |A(l_i)| / (p q) < τ``; with ``"agreement"`` when
-    ``|A(l_i)| / |N(l_i)| < outlier_min_agreement``, ``N(l_i)`` all lines of the direction in
+    ``|A(l_i)| / |N(l_i)| < outliers.min_agreement``, ``N(l_i)`` all lines of the direction in
     the window: a point is an outlier when its neighbours disagree with it, not when it has
     few neighbours (isolated points on sparsely textured surfaces are kept).
 
@@ -45,7 +45,7 @@ def reject_outliers(
         edges: the edge set (centre-view positions).
         labels: ``(N,)`` int filter label of each point.
         shape: ``(H, W)`` of the centre view.
-        config: `EdgeConfig` (``outlier_window_frac``, ``outlier_label_tol``, ``outlier_tau``).
+        config: `EdgeConfig` (``outliers.window_frac``, ``outliers.label_tol``, ``outliers.tau``).
 
     Returns:
         ``(N,)`` bool, True = keep (invalid points are returned False).
@@ -54,9 +54,9 @@ def reject_outliers(
         Thesis Sec. 4.1.3, eqs 4.1–4.2.
     """
     H, W = shape
-    n = config.n_filters
-    p = max(1, round(W * config.outlier_window_frac))
-    q = max(1, round(H * config.outlier_window_frac))
+    n = config.filter.n_filters
+    p = max(1, round(W * config.outliers.window_frac))
+    q = max(1, round(H * config.outliers.window_frac))
     xi = jnp.clip(jnp.round(edges.x).astype(jnp.int32), 0, W - 1)
     yi = jnp.clip(jnp.round(edges.y).astype(jnp.int32), 0, H - 1)
     lab = jnp.clip(labels, 0, n - 1)
@@ -66,17 +66,17 @@ def reject_outliers(
         grid = jnp.zeros((n, H, W), jnp.float32).at[lab, yi, xi].add(sel.astype(jnp.float32))
         counts = _box_sum(grid, q // 2, p // 2)  # (n, H, W)
         total = jnp.sum(counts, axis=0)[yi, xi]
-        tol = config.outlier_label_tol
+        tol = config.outliers.label_tol
         if tol:
             cs = jnp.pad(jnp.cumsum(counts, axis=0), ((1, 0), (0, 0), (0, 0)))
             hi = jnp.clip(jnp.arange(n) + tol + 1, 0, n)
             lo = jnp.clip(jnp.arange(n) - tol, 0, n)
             counts = cs[hi] - cs[lo]
         a = counts[lab, yi, xi]
-        if config.outlier_test == "agreement":
-            ok = a >= config.outlier_min_agreement * total
+        if config.outliers.test == "agreement":
+            ok = a >= config.outliers.min_agreement * total
         else:
-            ok = edges.confidence * a / (p * q) >= config.outlier_tau
+            ok = edges.confidence * a / (p * q) >= config.outliers.tau
         keep = keep | (sel & ok)
     return keep
 
@@ -87,10 +87,11 @@ def trilateral_filter(
     """Joint spatial / disparity / colour filter of the sparse disparities (eq 4.6).
 
     ``f(p_d) = Σ_q N_σs(|p_s - q_s|) N_σd(p_d - q_d) N_σc(|p_c - q_c|) q_d / W`` over the valid
-    visible points ``q`` (both directions) in a ``(2r+1)^2`` window, ``r = trilateral_radius``.
-    Points are rasterised to the centre-view pixel grid (one per pixel and EPI direction) and
-    the filter runs densely on the grids: a ``lax.fori_loop`` over the window offsets, each step
-    a few element-wise operations on ``(2, 2, H, W)`` arrays. Colour distances use LAB / 100.
+    visible points ``q`` (both directions) in a ``(2r+1)^2`` window,
+    ``r = refine.trilateral_radius``. Points are rasterised to the centre-view pixel grid (one
+    per pixel and EPI direction) and the filter runs densely on the grids: a ``lax.fori_loop``
+    over the window offsets, each step a few element-wise operations on ``(2, 2, H, W)``
+    arrays. Colour distances use LAB / 100.
 
     Returns:
         ``(N,)`` filtered disparities (unchanged for invalid points).
@@ -99,7 +100,7 @@ def trilateral_filter(
         Thesis Sec. 4.1.5, eq 4.6.
     """
     H, W = shape
-    r = config.trilateral_radius
+    r = config.refine.trilateral_radius
     xi = jnp.clip(jnp.round(edges.x).astype(jnp.int32), 0, W - 1)
     yi = jnp.clip(jnp.round(edges.y).astype(jnp.int32), 0, H - 1)
     use = edges.valid & edges.visible
@@ -114,9 +115,9 @@ def trilateral_filter(
     grid = jnp.zeros((2, H, W, 5), dt).at[ch, ys, xi].set(vals, mode="drop")
     p = jnp.moveaxis(grid, -1, 0)  # (5, 2, H, W)
     q = jnp.pad(p, ((0, 0), (0, 0), (r, r), (r, r)))
-    a_s = 0.5 / config.sigma_s**2
-    a_d = 0.5 / config.sigma_d**2
-    a_c = 0.5 / config.sigma_c**2
+    a_s = 0.5 / config.refine.sigma_s**2
+    a_d = 0.5 / config.refine.sigma_d**2
+    a_c = 0.5 / config.refine.sigma_c**2
     side = 2 * r + 1
 
     def body(k, carry):

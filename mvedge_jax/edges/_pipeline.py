@@ -42,26 +42,27 @@ _LAB_SCALE = 0.01
 
 
 def resolve_d_max(config: EdgeConfig, disparity_range: tuple[float, float] | None) -> float:
-    """Half-range of the filter bank for a scene (see `EdgeConfig.d_max`).
+    """Half-range of the filter bank for a scene (see `FilterConfig.d_max`).
 
     Raises:
-        ValueError: if the scene's disparity range is not covered by ``config.d_max``.
+        ValueError: if the scene's disparity range is not covered by ``config.filter.d_max``.
     """
-    if config.d_max is not None:
+    fc = config.filter
+    if fc.d_max is not None:
         if disparity_range is not None:
             lo, hi = disparity_range
-            if max(abs(lo), abs(hi)) > config.d_max:
+            if max(abs(lo), abs(hi)) > fc.d_max:
                 raise ValueError(
-                    f"the filter bank covers disparities [-{config.d_max}, {config.d_max}] but "
-                    f"the scene's range is [{lo}, {hi}]; raise EdgeConfig.d_max"
+                    f"the filter bank covers disparities [-{fc.d_max}, {fc.d_max}] but "
+                    f"the scene's range is [{lo}, {hi}]; raise EdgeConfig.filter.d_max"
                 )
-        return float(config.d_max)
+        return float(fc.d_max)
     if disparity_range is not None:
         lo, hi = disparity_range
         if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
             raise ValueError(f"invalid disparity range {disparity_range}")
-        return max(abs(lo), abs(hi)) + config.d_margin
-    return float(config.d_max_fallback)
+        return max(abs(lo), abs(hi)) + fc.d_margin
+    return float(fc.d_max_fallback)
 
 
 def build_bank(config: EdgeConfig, n_views: int, d_max: float):
@@ -72,10 +73,12 @@ def build_bank(config: EdgeConfig, n_views: int, d_max: float):
     of such a filter meet the EPI, so the bank is built with height ``h`` and the width its
     steepest line needs.
     """
-    disps = filter_disparities(config.n_filters, d_max)
+    disps = filter_disparities(config.filter.n_filters, d_max)
     h = n_views if n_views % 2 else n_views + 1
     width = bank_width(h, d_max, 1.5) + 2  # room for edge_shift up to 1.5 and anti-aliasing
-    return disps, prewitt_bank(disps, h, width, shift=config.edge_shift, aa_sigma=config.aa_sigma)
+    return disps, prewitt_bank(
+        disps, h, width, shift=config.filter.edge_shift, aa_sigma=config.filter.aa_sigma
+    )
 
 
 def _srgb_to_lab(rgb: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
@@ -114,7 +117,7 @@ _RGB_TO_XYZ = (
 
 def _to_lab(views: Float[Array, "N H W 3"], config: EdgeConfig):
     lab = _srgb_to_lab(views) * _LAB_SCALE
-    blur = blur_images(lab, config.presmooth_sigma, config.blur_radius)
+    blur = blur_images(lab, config.filter.presmooth_sigma, config.filter.blur_radius)
     return lab, blur
 
 
@@ -124,13 +127,14 @@ def _candidates(blur, disps, bank, d_max: float, config: EdgeConfig) -> dict[str
     N, h, W, _ = blur.shape
     n = disps.shape[0]
     spacing = 2.0 * d_max / (n - 1)  # static
-    det = detect_centre_row(blur, bank, chunk=config.chunk)
+    lc = config.label
+    det = detect_centre_row(blur, bank, chunk=config.filter.chunk)
     std3 = local_std(blur)
     craw = det["conf"]
-    conf = (non_max_suppress(craw) if config.nms else craw) * std3
-    conf = jnp.where(std3 >= config.min_local_std, conf, 0.0)
-    cap = W if config.line_capacity is None else config.line_capacity
-    idx, cvalid, overflow = top_candidates(conf, cap, config.min_confidence)
+    conf = (non_max_suppress(craw) if lc.nms else craw) * std3
+    conf = jnp.where(std3 >= lc.min_local_std, conf, 0.0)
+    cap = W if lc.line_capacity is None else lc.line_capacity
+    idx, cvalid, overflow = top_candidates(conf, cap, lc.min_confidence)
     g = lambda a: jnp.take_along_axis(a, idx, axis=1)
     label = g(det["label"])
     # Sub-pixel position across the edge: parabola through the max response at x-1, x, x+1.
@@ -138,7 +142,7 @@ def _candidates(blur, disps, bank, d_max: float, config: EdgeConfig) -> dict[str
     cp = jnp.take_along_axis(craw, jnp.clip(idx + 1, 0, W - 1), 1)
     xc = idx.astype(jnp.float32) + parabola_offset(cm, g(craw), cp)
     d = disps[label]
-    if config.subpixel in ("parabolic", "variance"):
+    if lc.subpixel in ("parabolic", "variance"):
         interior = (label > 0) & (label < n - 1)
         off = parabola_offset(g(det["r_prev"]), g(craw), g(det["r_next"]))
         d = d + jnp.where(interior, off, 0.0) * spacing
@@ -157,45 +161,46 @@ def _refine_lines(raw, blur, cand, radius: float, config: EdgeConfig, key) -> di
     search for candidate lines ``(N, K)`` of EPIs ``(N, h, W, C)``."""
     N, h, W, _ = raw.shape
     xc, d, valid = cand["pos"], cand["disparity"], cand["valid"]
-    if config.subpixel == "variance":
+    lc, rc = config.label, config.refine
+    if lc.subpixel == "variance":
         d, std, _, ratio = jax.lax.map(
             lambda a: variance_search(
                 a[0],
                 a[1],
                 a[2],
                 radius=radius,
-                offset=config.variance_offset,
-                steps=config.variance_steps,
-                cubic=config.cubic,
+                offset=lc.variance_offset,
+                steps=lc.variance_steps,
+                cubic=lc.cubic,
             ),
-            (blur if config.variance_on_blurred else raw, xc, d),
-            batch_size=min(config.refine_chunk, N),
+            (blur if lc.variance_on_blurred else raw, xc, d),
+            batch_size=min(lc.refine_chunk, N),
         )
-        valid = valid & (ratio >= config.min_ratio)
+        valid = valid & (ratio >= lc.min_ratio)
     else:
-        std = jax.vmap(lambda e, x, dd: best_side_std(e, x, dd, config.variance_offset))(raw, xc, d)
-    valid = valid & (std <= config.max_colour_std)
+        std = jax.vmap(lambda e, x, dd: best_side_std(e, x, dd, lc.variance_offset))(raw, xc, d)
+    valid = valid & (std <= lc.max_colour_std)
     # ---- line fitting (4.1.2) among the reliable candidates ----------------------------------
     uc = jnp.full_like(xc, h // 2)
-    lam = config.lambda_frac * h
+    lam = lc.lambda_frac * h
     valid = jax.vmap(fit_lines, in_axes=(0, 0, 0, 0, None))(uc, xc, d, valid, lam)
     # ---- gradient alignment (eq 4.3) and centre-view visibility (eq 4.4) --------------------
-    if config.gradient_alignment:
+    if rc.gradient_alignment:
         tens = jax.vmap(sobel_tensor)(blur)
         cos = jax.vmap(alignment_cosines)(tens, xc, d)  # (N, K, h)
-        visible = cos[..., h // 2] > jnp.cos(config.tau_v)
-        aligned = jnp.sum(cos > jnp.cos(config.tau_f), axis=-1)
-        valid = valid & (aligned >= h / config.alignment_c)
+        visible = cos[..., h // 2] > jnp.cos(rc.tau_v)
+        aligned = jnp.sum(cos > jnp.cos(rc.tau_f), axis=-1)
+        valid = valid & (aligned >= h / rc.alignment_c)
     else:  # only the centre row is needed for the visibility test
         tens = jax.vmap(sobel_tensor)(blur[:, h // 2 - 1 : h // 2 + 2])[:, 1:2]
         cos = jax.vmap(alignment_cosines)(tens, xc, d)  # (N, K, 1)
-        visible = cos[..., 0] > jnp.cos(config.tau_v)
-    if config.drop_invisible:
+        visible = cos[..., 0] > jnp.cos(rc.tau_v)
+    if rc.drop_invisible:
         valid = valid & visible
     # ---- entropy-based random search of the intercepts (eq 4.5) ------------------------------
     xt = xc + (h // 2) * d
     xb = xc - (h - 1 - h // 2) * d
-    if config.entropy_search:
+    if rc.entropy_search:
         keys = jax.random.split(key, N)
         xt, xb = jax.vmap(
             lambda e, a, b, act, k: entropy_search(
@@ -204,10 +209,10 @@ def _refine_lines(raw, blur, cand, radius: float, config: EdgeConfig, key) -> di
                 b,
                 act,
                 k,
-                iters=config.entropy_iters,
-                t=config.entropy_t,
-                alpha=config.entropy_alpha,
-                bins=config.entropy_bins,
+                iters=rc.entropy_iters,
+                t=rc.entropy_t,
+                alpha=rc.entropy_alpha,
+                bins=rc.entropy_bins,
             )
         )(raw[..., 0], xt, xb, valid & visible, keys)
         d = (xt - xb) / (h - 1)
@@ -237,15 +242,17 @@ def _epis(views, perm, config):
 def _direction_lines(views, perm, d_max: float, config: EdgeConfig, key) -> dict[str, Array]:
     """All lines of one EPI direction; ``views (n, H, W, 3)``, ``perm`` makes EPIs from them."""
     n_views = views.shape[0]
-    spacing = 2.0 * d_max / (config.n_filters - 1)
-    radius = max(config.variance_radius * spacing, config.variance_min_shift / (n_views // 2))
+    spacing = 2.0 * d_max / (config.filter.n_filters - 1)
+    radius = max(
+        config.label.variance_radius * spacing, config.label.variance_min_shift / (n_views // 2)
+    )
     disps, bank = build_bank(config, n_views, d_max)
     raw, blur = _epis(views, perm, config)
     k1, k2 = jax.random.split(key)
     lines = _refine_lines(
         raw, blur, _candidates(blur, disps, bank, d_max, config), radius, config, k1
     )
-    if not config.multiscale:
+    if not config.refine.multiscale:
         return lines
     # ---- spatial multi-scale (4.1.4): 2x coarser views, lines a fine line does not explain --
     n, H, W, C = views.shape
@@ -265,7 +272,7 @@ def _direction_lines(views, perm, d_max: float, config: EdgeConfig, key) -> dict
     cvalid = pad(rep(coarse["valid"]))
     cxt = cpos + (h // 2) * cd
     cxb = cpos - (h - 1 - h // 2) * cd
-    lam = config.multiscale_lambda_frac * h
+    lam = config.refine.multiscale_lambda_frac * h
     close = (
         (jnp.abs(cxt[:, :, None] - lines["xt"][:, None, :]) < lam)
         & (jnp.abs(cxb[:, :, None] - lines["xb"][:, None, :]) < lam)
@@ -331,7 +338,7 @@ def soft_labels(
 
     At each point the filter-response magnitudes ``r_i`` of its own EPI direction
     (`soft_filter_responses`, interpolated linearly along the EPI's spatial axis) give
-    ``p = softmax(r / τ)`` with ``τ = config.temperature · max_i r_i`` (relative, so the
+    ``p = softmax(r / τ)`` with ``τ = config.label.temperature · max_i r_i`` (relative, so the
     softmax does not depend on the image contrast) and the label ``Σ p_i d_i``. The points,
     their validity and confidence are unchanged; the intercepts follow the new disparity. The
     labels are smooth functions of the views and of ``presmooth_sigma``, ``edge_shift``,
@@ -352,11 +359,11 @@ def soft_labels(
     """
     kw = dict(
         d_max=d_max,
-        n_filters=config.n_filters,
-        presmooth_sigma=config.presmooth_sigma,
-        edge_shift=config.edge_shift,
-        aa_sigma=config.aa_sigma,
-        blur_radius=config.blur_radius,
+        n_filters=config.filter.n_filters,
+        presmooth_sigma=config.filter.presmooth_sigma,
+        edge_shift=config.filter.edge_shift,
+        aa_sigma=config.filter.aa_sigma,
+        blur_radius=config.filter.blur_radius,
     )
     disparity = edges.disparity
     for direction, views in ((HORIZONTAL, row_views), (VERTICAL, col_views)):
@@ -365,7 +372,7 @@ def soft_labels(
             r = _sample_rows(mag, edges.x, edges.y)
         else:  # EPIs of pixel columns: the spatial axis is y
             r = _sample_rows(jnp.swapaxes(mag, 0, 1), edges.y, edges.x)
-        tau = config.temperature * jnp.max(r, axis=-1, keepdims=True)
+        tau = config.label.temperature * jnp.max(r, axis=-1, keepdims=True)
         d, _ = soft_select(r, disps, tau)
         disparity = jnp.where(edges.direction == direction, d.astype(disparity.dtype), disparity)
     n = jnp.where(edges.direction == HORIZONTAL, row_views.shape[0], col_views.shape[0])
@@ -404,11 +411,11 @@ def detect_edges_arrays(
     _, H, W, _ = row_views.shape
     kh, kv = jax.random.split(key)
     sets = []
-    if config.directions in ("both", "horizontal"):
+    if config.filter.directions in ("both", "horizontal"):
         # (V, H, W, C) -> EPIs (H, V, W, C)
         lines = _direction_lines(row_views, (1, 0, 2, 3), d_max, config, kh)
         sets.append(_to_edgeset(lines, HORIZONTAL))
-    if config.directions in ("both", "vertical"):
+    if config.filter.directions in ("both", "vertical"):
         # (U, H, W, C) -> EPIs (W, U, H, C)
         lines = _direction_lines(col_views, (2, 0, 1, 3), d_max, config, kv)
         sets.append(_to_edgeset(lines, VERTICAL))
@@ -417,13 +424,13 @@ def detect_edges_arrays(
     for es, lab in sets[1:]:
         edges = concatenate(edges, es)
         labels = jnp.concatenate([labels, lab])
-    if config.strategy == "soft":
+    if config.label.strategy == "soft":
         edges = soft_labels(edges, row_views, col_views, config, d_max=d_max)
-    few_views = min(row_views.shape[0], col_views.shape[0]) <= config.outlier_auto_views
-    if config.outliers or (config.outliers is None and few_views):
+    few_views = min(row_views.shape[0], col_views.shape[0]) <= config.outliers.auto_views
+    if config.outliers.enabled or (config.outliers.enabled is None and few_views):
         keep = reject_outliers(edges, labels, (H, W), config)
         edges = eqx.tree_at(lambda e: e.valid, edges, edges.valid & keep)
-    if config.trilateral:
+    if config.refine.trilateral:
         d = trilateral_filter(edges, (H, W), config)
         # Keep the intercepts on the filtered line through the same centre-view position.
         n = jnp.where(edges.direction == HORIZONTAL, row_views.shape[0], col_views.shape[0])
@@ -456,7 +463,7 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
     5. Outlier rejection by same-disparity neighbours (4.1.3, eqs 4.1–4.2).
     6. Trilateral filter of the sparse disparities (eq 4.6, radius 3).
 
-    With ``config.strategy = "soft"`` the points are then relabelled by `soft_labels` (a
+    With ``config.label.strategy = "soft"`` the points are then relabelled by `soft_labels` (a
     softmax over the filter responses; smooth in the hyperparameters) before steps 5–6.
 
     Optional stages: gradient-alignment test (eq 4.3), dropping points not visible in the
@@ -468,21 +475,22 @@ def detect_edges(lf: LightField, config: EdgeConfig = EdgeConfig(), *, key=None)
         lf: the light field (only the central row and column of views are read).
         config: `EdgeConfig`.
         key: PRNG key of the entropy search (``None``: ``jax.random.key(0)``). The bank's
-            half-range ``d_max`` comes from ``config.d_max``, else from the scene's
-            ``disparity_range`` (+ ``config.d_margin``), else ``config.d_max_fallback``.
+            half-range ``d_max`` comes from ``config.filter.d_max``, else from the scene's
+            ``disparity_range`` (+ ``filter.d_margin``), else ``filter.d_max_fallback``.
 
     Returns:
         An `EdgeSet` of capacity ``H * K_h + W * K_v`` (one direction only: the matching term),
-        ``K = config.line_capacity`` or the EPI width; ``n_dropped`` counts candidates lost to
+        ``K = config.label.line_capacity`` or the EPI width; ``n_dropped`` counts candidates lost to
         the capacity.
 
     Raises:
         ValueError: fewer than 3 views in a direction, a disparity range the bank cannot cover
-            (scene range beyond ``config.d_max``, or lines wider than the image), or
+            (scene range beyond ``config.filter.d_max``, or lines wider than the image), or
             non-finite pixels.
 
     Warns:
-        UserWarning: when candidates were dropped because ``config.line_capacity`` was too small.
+        UserWarning: when candidates were dropped because ``config.label.line_capacity`` was too
+            small.
 
     References:
         Thesis Ch. 4.1 (Alg. 1, Secs. 4.1.1–4.1.5); SPEC §1.
@@ -533,7 +541,7 @@ def check_cross_hair(lf: LightField, config: EdgeConfig) -> float:
 
 
 def warn_dropped(edges: EdgeSet, config: EdgeConfig) -> int:
-    """Warn when candidates did not fit in ``config.line_capacity``; returns their number.
+    """Warn when candidates did not fit in ``config.label.line_capacity``; returns their number.
 
     Warns:
         UserWarning: when ``edges.n_dropped > 0``.
@@ -544,7 +552,8 @@ def warn_dropped(edges: EdgeSet, config: EdgeConfig) -> int:
     if dropped > 0:
         warnings.warn(
             f"detect_edges: {dropped} edge candidates did not fit in line_capacity="
-            f"{config.line_capacity} per EPI and were dropped; raise EdgeConfig.line_capacity",
+            f"{config.label.line_capacity} per EPI and were dropped; raise "
+            "EdgeConfig.label.line_capacity",
             stacklevel=3,
         )
     return dropped

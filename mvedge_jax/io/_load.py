@@ -25,7 +25,7 @@ MIN_VIEW_SIZE = 16
 
 
 #: Ground truth may exceed the metadata disparity range by this much (px/view) unwarned: the
-#: filter bank extends the range by ``EdgeConfig.d_margin`` (0.25) anyway.
+#: filter bank extends the range by ``EdgeConfig.filter.d_margin`` (0.25) anyway.
 _RANGE_SLACK = 0.25
 
 
@@ -299,7 +299,7 @@ def _checked_range(
     view between the outermost views of the grid (``|d| (max(U, V) - 1) > max(H, W)``);
     such a range is ignored (the pipeline then uses its configured fallback). A range that
     the ground truth (where present) exceeds by more than `_RANGE_SLACK` (0.25 px/view, the
-    default ``EdgeConfig.d_margin``) is kept but warned about. Each warning is issued as a
+    default ``EdgeConfig.filter.d_margin``) is kept but warned about. Each warning is issued as a
     `DisparityRangeWarning` and returned.
     """
     drange = info.disparity_range
@@ -313,7 +313,7 @@ def _checked_range(
             f"the metadata disparity range [{lo:g}, {hi:g}] px/view of {info.folder} is "
             f"implausible for {grid[0]}x{grid[1]} views of {size[0]}x{size[1]} px (beyond "
             f"±{bound:.3g}: points would leave the views); ignored, the disparity range used "
-            "is unknown (the pipeline's EdgeConfig.d_max or d_max_fallback applies)"
+            "is unknown (the pipeline's EdgeConfig.filter.d_max or d_max_fallback applies)"
         )
         drange = None
     elif gt is not None and gt_mask is not None and gt_mask.any():
@@ -323,7 +323,7 @@ def _checked_range(
             notes.append(
                 f"the metadata disparity range [{lo:g}, {hi:g}] px/view of {info.folder} is "
                 f"narrower than its ground truth [{g_lo:.3g}, {g_hi:.3g}]; the range used is "
-                f"still [{lo:g}, {hi:g}] (set EdgeConfig.d_max to cover the scene)"
+                f"still [{lo:g}, {hi:g}] (set EdgeConfig.filter.d_max to cover the scene)"
             )
     for note in notes:
         warnings.warn(note, DisparityRangeWarning, stacklevel=3)

@@ -108,10 +108,11 @@ def estimate_disparity_arrays(
 
     Jit it with ``d_max`` static (``jax.jit(estimate_disparity_arrays,
     static_argnames="d_max")``); differentiate or ``vmap`` it with respect to ``views`` or
-    the array fields of ``config`` (e.g. ``eqx.tree_at(lambda c: c.edges.presmooth_sigma,
-    config, s)``). `mvedge_jax.pipeline.DIFFERENTIABLE` lists the fields it is smooth in;
-    the thresholds are piecewise constant. It computes in the precision of ``views``
-    (float32, or float64 under ``jax_enable_x64``).
+    the array fields of ``config`` (e.g. ``eqx.tree_at(lambda c:
+    c.edges.filter.presmooth_sigma, config, s)``). `hyperparameter_paths`
+    (``differentiable=True``) lists the fields it is smooth in; the thresholds are piecewise
+    constant. It computes in the precision of ``views`` (float32, or float64 under
+    ``jax_enable_x64``).
 
     Args:
         views: ``(U, V, H, W, 3)`` RGB in [0, 1], finite; the cross-hair must be complete.

@@ -242,6 +242,7 @@ def edge_memory_estimate(
         ``(bytes, description of the driving values)``.
     """
     d_max = resolve_d_max(config, disparity_range)
+    fc = config.filter
     U, V = grid
     H, W = size
     total, widths = 0, []
@@ -249,25 +250,25 @@ def edge_memory_estimate(
         h = n_views if n_views % 2 else n_views + 1
         fw = bank_width(h, d_max, 1.5) + 2
         widths.append(fw)
-        bank = config.n_filters * h * fw * 4
-        chunk = min(config.chunk, length)
-        conv = chunk * (h * (length + fw) * 3 + config.n_filters * length * 3) * 4
+        bank = fc.n_filters * h * fw * 4
+        chunk = min(fc.chunk, length)
+        conv = chunk * (h * (length + fw) * 3 + fc.n_filters * length * 3) * 4
         total = max(total, 2 * bank + conv)
     src = (
         "d_max"
-        if config.d_max is not None
+        if fc.d_max is not None
         else ("the scene's disparity range" if disparity_range is not None else "d_max_fallback")
     )
     why = (
-        f"filter bank of {config.n_filters} filters (n_filters) × {max(widths)} px wide "
-        f"(from d_max = {d_max:g} px/view, set by {src}), chunk = {config.chunk}"
+        f"filter bank of {fc.n_filters} filters (n_filters) × {max(widths)} px wide "
+        f"(from d_max = {d_max:g} px/view, set by {src}), chunk = {fc.chunk}"
     )
     return int(total), why
 
 
 def check_memory(config, grid, size, disparity_range, *, views_bytes: int = 0) -> None:
     """Refuse a configuration whose edge detection cannot fit in memory, before anything
-    is allocated (e.g. ``edges.d_max_fallback = 1e6``).
+    is allocated (e.g. ``edges.filter.d_max_fallback = 1e6``).
 
     Raises:
         ConfigError: naming the estimate, the limit and the values that drive it.
@@ -278,7 +279,7 @@ def check_memory(config, grid, size, disparity_range, *, views_bytes: int = 0) -
         raise ConfigError(
             f"edge detection would need about {_gib(need + views_bytes)} for {grid[0]}x{grid[1]} "
             f"views of {size[0]}x{size[1]} px, more than the {_gib(limit)} available: {why}. "
-            "Lower edges.d_max / d_max_fallback, n_filters or chunk"
+            "Lower edges.filter.d_max / d_max_fallback, n_filters or chunk"
         )
 
 
@@ -399,7 +400,7 @@ def check_range_saturation(
         f"{100.0 * frac:.1f}% of the edge points of {name!r} have a disparity at the end of "
         f"the filter bank (|d| within {spacing:.3g} of d_max = {d_max:.3g} px per view step): "
         "the scene's disparity range is probably wider than the one used; give a wider range "
-        "(EdgeConfig d_max, or fix the range in the scene's metadata)"
+        "(edges.filter.d_max, or fix the range in the scene's metadata)"
     ]
 
 
@@ -456,7 +457,7 @@ def diagnose(lf, config, edges, surface, disparity, *, d_max: float) -> dict:
     """
     warnings = check_edges(lf.name, int(np.asarray(edges.valid).sum()), lf.size)
     saturated, more = check_range_saturation(
-        lf.name, edges.disparity, edges.valid, d_max, config.edges.n_filters
+        lf.name, edges.disparity, edges.valid, d_max, config.edges.filter.n_filters
     )
     warnings += more
     status, more = check_solver("surface", surface.residual, float(config.surface.solver.rtol))

@@ -61,10 +61,28 @@ class PipelineConfig(eqx.Module):
 _STAGE_FIELDS = ("edges", "surface", "reconstruct")
 
 
+def _hyperparameter_fields(config: eqx.Module, prefix: str, differentiable: bool | None):
+    """Dotted paths of the hyperparameters of ``config`` and of its nested configs."""
+    out = []
+    for f in dataclasses.fields(config):
+        spec = field_spec(f)
+        if spec is None:
+            value = getattr(config, f.name)
+            if isinstance(value, eqx.Module):
+                out += _hyperparameter_fields(value, f"{prefix}.{f.name}", differentiable)
+            continue
+        if spec.kind != "hyperparameter":
+            continue
+        if differentiable is None or spec.differentiable == differentiable:
+            out.append(f"{prefix}.{f.name}")
+    return out
+
+
 def hyperparameter_paths(
     config: PipelineConfig | None = None, *, differentiable: bool | None = None
 ) -> tuple[str, ...]:
-    """Dotted paths (``"edges.presmooth_sigma"``) of the chain's scalar hyperparameters.
+    """Dotted paths (``"edges.filter.presmooth_sigma"``) of the chain's scalar
+    hyperparameters.
 
     Args:
         config: the configuration whose stage configs are listed (default
@@ -73,23 +91,17 @@ def hyperparameter_paths(
             thresholds (piecewise constant); ``None``: all.
 
     Returns:
-        The paths, stage by stage in declaration order.
+        The paths, stage by stage and sub-config by sub-config in declaration order.
     """
     config = PipelineConfig() if config is None else config
     out = []
     for stage in _STAGE_FIELDS:
-        sub = getattr(config, stage)
-        for f in dataclasses.fields(sub):
-            spec = field_spec(f)
-            if spec is None or spec.kind != "hyperparameter":
-                continue
-            if differentiable is None or spec.differentiable == differentiable:
-                out.append(f"{stage}.{f.name}")
+        out += _hyperparameter_fields(getattr(config, stage), stage, differentiable)
     return tuple(out)
 
 
 def get_path(config: eqx.Module, path: str):
-    """The value at a dotted path, e.g. ``get_path(config, "edges.presmooth_sigma")``."""
+    """The value at a dotted path, e.g. ``get_path(config, "edges.filter.presmooth_sigma")``."""
     value = config
     for part in path.split("."):
         value = getattr(value, part)
@@ -116,48 +128,56 @@ def replace_paths(config: eqx.Module, values: dict) -> eqx.Module:
     return eqx.tree_at(where, config, tuple(as_float(values[p]) for p in paths))
 
 
+def _rebuilt(config: eqx.Module, values: dict) -> eqx.Module:
+    """``config`` rebuilt through its constructor with ``values`` at paths relative to it
+    (nested configs are rebuilt through theirs)."""
+    direct, nested = {}, {}
+    for path, value in values.items():
+        head, _, rest = path.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        else:
+            direct[head] = value
+    for head, sub in nested.items():
+        direct[head] = _rebuilt(getattr(config, head), sub)
+    return dataclasses.replace(config, **direct)
+
+
 def with_values(config: PipelineConfig, values: dict) -> PipelineConfig:
     """``config`` with concrete new values at dotted paths, rebuilt through the stage
-    configs' constructors (so the values are converted and validated, unlike
-    `replace_paths`).
+    configs' and sub-configs' constructors (so the values are converted and validated,
+    unlike `replace_paths`).
 
     Raises:
-        AttributeError: on a path that names no field.
+        AttributeError: on a path that names no field of a stage config
+            (``stage.sub.field``, or ``stage.field`` for a field of the stage config itself).
         TypeError, ValueError: on a value the field does not accept.
     """
-    by_stage: dict[str, dict] = {}
-    for path, value in values.items():
+    for path in values:
         stage, _, name = path.partition(".")
-        if stage not in _STAGE_FIELDS or "." in name:
-            raise AttributeError(f"{path!r} is not a field of a stage config (stage.field)")
+        if stage not in _STAGE_FIELDS or not name:
+            raise AttributeError(f"{path!r} is not a field of a stage config (stage.sub.field)")
         get_path(config, path)
-        by_stage.setdefault(stage, {})[name] = value
-    updates = {
-        stage: dataclasses.replace(getattr(config, stage), **fields)
-        for stage, fields in by_stage.items()
-    }
-    return dataclasses.replace(config, **updates)
+    return _rebuilt(config, values)
 
 
 def smooth_config(config: PipelineConfig | None = None) -> PipelineConfig:
     """``config`` with the smooth surrogates of its piecewise-constant stages: soft edge
-    labels (``edges.strategy = "soft"``) and the weighted mean instead of the weighted
-    median (``reconstruct.sharpen_filter = "mean"``). Use it to differentiate the chain
-    with respect to ``edges.temperature`` and ``reconstruct.wmf_sigma`` (the chain is
-    piecewise constant in them otherwise), or for gradient-based tuning (`tune`).
+    labels (``edges.label.strategy = "soft"``) and the weighted mean instead of the weighted
+    median (``reconstruct.sharpen.filter = "mean"``). Use it to differentiate the chain
+    with respect to ``edges.label.temperature`` and ``reconstruct.sharpen.wmf_sigma`` (the
+    chain is piecewise constant in them otherwise), or for gradient-based tuning (`tune`).
 
     Args:
         config: the configuration to modify (default `PipelineConfig()`).
 
     Returns:
-        The `PipelineConfig` with ``edges.strategy = "soft"`` and
-        ``reconstruct.sharpen_filter = "mean"``, other fields unchanged.
+        The `PipelineConfig` with ``edges.label.strategy = "soft"`` and
+        ``reconstruct.sharpen.filter = "mean"``, other fields unchanged.
     """
     config = PipelineConfig() if config is None else config
-    return dataclasses.replace(
-        config,
-        edges=dataclasses.replace(config.edges, strategy="soft"),
-        reconstruct=dataclasses.replace(config.reconstruct, sharpen_filter="mean"),
+    return with_values(
+        config, {"edges.label.strategy": "soft", "reconstruct.sharpen.filter": "mean"}
     )
 
 
@@ -169,11 +189,11 @@ def config_from_dict(data: dict, *, source: str | None = None) -> PipelineConfig
     "optimize": {...}}`` (keyword arguments of the stage configs; missing tables and keys keep
     the defaults).
 
-    Nested configs are sub-tables, e.g. in TOML ``[optimize.loss]`` (``LossConfig``),
-    ``[optimize.model]``, ``[optimize.model.render]`` or ``[reconstruct.epi_solver]``; arrays
-    become tuples (``blocks``, ``learning_rate``, ``tile_levels``). Every value is checked
-    against the type of the field's default (`override_config`): ``"false"`` is not a
-    boolean, an array is not a number.
+    Nested configs are sub-tables, e.g. in TOML ``[edges.filter]`` (`FilterConfig`),
+    ``[reconstruct.epi.solver]``, ``[optimize.loss]`` (``LossConfig``), ``[optimize.model]``
+    or ``[optimize.model.render]``; arrays become tuples (``blocks``, ``learning_rate``,
+    ``tile_levels``). Every value is checked against the type of the field's default
+    (`override_config`): ``"false"`` is not a boolean, an array is not a number.
 
     Args:
         data: the tables.

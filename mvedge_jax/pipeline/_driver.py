@@ -228,8 +228,8 @@ def optimize_disparity(
     4. With ``select_initial``: the optimised map and the Ch. 6 centre map are merged pixel
        by pixel by photo-consistency with the cross-hair views (`select_centre`; not in the
        thesis): the optimised value is kept where it differs by more than
-       ``config.reconstruct.select_min_change`` (0 by default) and matches the views
-       better, by colour L1 plus ``select_ssim`` times the SSIM dissimilarity (eq 7.16's
+       ``config.reconstruct.select.min_change`` (0 by default) and matches the views
+       better, by colour L1 plus ``select.ssim`` times the SSIM dissimilarity (eq 7.16's
        data terms; the L1 alone missed half the pixels the optimisation had fixed on
        antinous, session 8). The
        optimisation fixes gross errors at depth edges but re-renders the whole map from

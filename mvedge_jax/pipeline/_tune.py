@@ -36,8 +36,8 @@ LOSSES = ("l1", "mse")
 
 
 def _is_positive(config: PipelineConfig, path: str) -> bool:
-    stage, name = path.split(".")
-    f = next(f for f in dataclasses.fields(getattr(config, stage)) if f.name == name)
+    owner, _, name = path.rpartition(".")
+    f = next(f for f in dataclasses.fields(get_path(config, owner)) if f.name == name)
     spec = field_spec(f)
     return spec is not None and spec.lower == 0.0 and spec.lower_open
 
@@ -138,14 +138,14 @@ def tune(
     ``fields``. Fields bounded below by 0 (weights, scales, σ, ε) are optimised as
     logarithms, so a step of ``learning_rate`` is a relative change of about that much and
     they stay positive. A step whose loss or gradient is not finite is skipped. Use
-    `smooth_config` for ``edges.temperature`` and ``reconstruct.wmf_sigma``, in which the
-    default (hard) chain is piecewise constant. One compilation per scene shape; the values
-    are traced.
+    `smooth_config` for ``edges.label.temperature`` and ``reconstruct.sharpen.wmf_sigma``, in
+    which the default (hard) chain is piecewise constant. One compilation per scene shape; the
+    values are traced.
 
     Args:
         config: the starting `PipelineConfig`.
         scenes: light fields with ground truth (every view's, or the centre view's).
-        fields: dotted paths of differentiable fields, e.g. ``["reconstruct.omega",
+        fields: dotted paths of differentiable fields, e.g. ``["reconstruct.centre.omega",
             "surface.gradient_sigma"]`` (`hyperparameter_paths` with
             ``differentiable=True``).
         steps: Adam steps (>= 0).

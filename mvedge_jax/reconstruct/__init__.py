@@ -1,7 +1,12 @@
 """Smooth 4D reconstruction from the multi-view edge model (thesis Ch. 6)."""
 
 from ._centre import centre_disparity as centre_disparity
+from ._config import CentreConfig as CentreConfig
+from ._config import EpiConfig as EpiConfig
+from ._config import FillConfig as FillConfig
 from ._config import ReconstructConfig as ReconstructConfig
+from ._config import SelectConfig as SelectConfig
+from ._config import SharpenConfig as SharpenConfig
 from ._crosshair import inpaint_epis as inpaint_epis
 from ._crosshair import photometric_confidence as photometric_confidence
 from ._crosshair import project_cross_hair as project_cross_hair

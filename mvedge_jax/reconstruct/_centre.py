@@ -74,8 +74,8 @@ def splat_bilinear(
 
 def edge_data_weight(step_response: Array, config: ReconstructConfig) -> Array:
     """``ω · exp(a · clip(λ_e, 0, λ_max))`` (eq 6.3)."""
-    lam_e = jnp.clip(step_response, 0.0, config.lambda_e_max)
-    return config.omega * jnp.exp(config.a * lam_e)
+    lam_e = jnp.clip(step_response, 0.0, config.centre.lambda_e_max)
+    return config.centre.omega * jnp.exp(config.centre.a * lam_e)
 
 
 def _pair_max(m: Array) -> tuple[Array, Array]:
@@ -119,11 +119,11 @@ def centre_problem(
         ``(data_weight, target, weight_x, weight_y)`` on the ``upsample×`` grid.
     """
     H, W = centre_view.shape[:2]
-    k = config.upsample
+    k = config.centre.upsample
     use = edges.valid & edges.visible
     off = jnp.asarray(surface.offset)
-    qx = edges.x + config.offset_scale * off[:, 0]
-    qy = edges.y + config.offset_scale * off[:, 1]
+    qx = edges.x + config.centre.offset_scale * off[:, 0]
+    qy = edges.y + config.centre.offset_scale * off[:, 1]
     w = jnp.where(use, edge_data_weight(jnp.asarray(surface.step_response), config), 0.0)
     guide = colour_guide(centre_view, config.colour_space)
     conf = jnp.asarray(surface.depth_edge_confidence)
@@ -133,7 +133,9 @@ def centre_problem(
         qx = 2.0 * qx + 0.5
         qy = 2.0 * qy + 0.5
     lam, target = splat_bilinear(qx, qy, edges.disparity, w, (k * H, k * W))
-    wx, wy = smoothness_weights(guide, conf, config.centre_c, config.centre_eps, config.conf_beta)
+    wx, wy = smoothness_weights(
+        guide, conf, config.centre.c, config.centre.eps, config.centre.conf_beta
+    )
     return lam, target, wx, wy
 
 
@@ -169,17 +171,17 @@ def centre_disparity(
     """Dense centre-view disparity by edge-aware diffusion of the edge labels (eq 6.1).
 
     Every valid edge point visible in the centre view is splatted (bilinearly, sub-pixel) at
-    ``p + offset_scale · n`` — ``n`` its surface vector, pointing to the surface its label
-    belongs to — with data weight ``ω · exp(a · λ_e)`` (eq 6.3; ``λ_e`` the step response of
+    ``p + centre.offset_scale · n`` — ``n`` its surface vector, pointing to the surface its
+    label belongs to — with data weight ``ω · exp(a · λ_e)`` (eq 6.3; ``λ_e`` the step response of
     the bidirectional diffusion). Smoothness between 4-neighbours is
     ``c / ((|∇I| + ε)(1 + β · conf))``: weak across colour edges and across likely depth edges
     (``conf`` the depth-edge confidence map of Sec. 4.3). The screened-Poisson problem is solved
-    with `solve_poisson` (PCG to ``config.solver.rtol``), optionally on a 2× grid and averaged
-    back. Pixels in a region with no label at all come out 0 (minimum-norm solution).
+    with `solve_poisson` (PCG to ``config.centre.solver.rtol``), optionally on a 2× grid and
+    averaged back. Pixels in a region with no label at all come out 0 (minimum-norm solution).
 
-    Differentiable w.r.t. the array leaves of ``config`` (``omega``, ``a``, ``centre_c``, …),
-    the edge disparities and the surface's step responses / confidence map (custom-VJP solve).
-    jit-able (``config`` is a pytree; its static fields select the code path).
+    Differentiable w.r.t. the array leaves of ``config`` (``centre.omega``, ``centre.a``,
+    ``centre.c``, …), the edge disparities and the surface's step responses / confidence map
+    (custom-VJP solve). jit-able (``config`` is a pytree; its static fields select the code path).
 
     Args:
         edges: `EdgeSet` of capacity ``N`` (centre-view positions, disparities, ``visible``).
@@ -202,7 +204,7 @@ def centre_disparity(
     if not jnp.issubdtype(centre_view.dtype, jnp.floating):
         centre_view = centre_view.astype(jnp.float32)
     lam, target, wx, wy = centre_problem(edges, surface, centre_view, config)
-    x = solve_poisson(lam, target, wx, wy, config=config.solver).x
-    if config.upsample == 2:
+    x = solve_poisson(lam, target, wx, wy, config=config.centre.solver).x
+    if config.centre.upsample == 2:
         x = _downsample2(x)
     return x

@@ -1,4 +1,6 @@
-"""`ReconstructConfig`: every option of the smooth 4D reconstruction (thesis Ch. 6)."""
+"""`ReconstructConfig`: every option of the smooth 4D reconstruction (thesis Ch. 6), one
+sub-config per step: `CentreConfig`, `SharpenConfig`, `SelectConfig`, `EpiConfig`,
+`FillConfig`."""
 
 from __future__ import annotations
 
@@ -16,14 +18,8 @@ MERGES = ("photo", "mean")
 SHARPEN_FILTERS = ("median", "mean")
 
 
-class ReconstructConfig(eqx.Module):
-    """Configuration of the smooth 4D reconstruction (centre diffusion, sharpening,
-    cross-hair projection, angular inpainting, off-cross-hair views).
-
-    Array fields are pytree leaves (sweep / `vmap` / differentiate without recompiling);
-    the others are static. Array fields marked "threshold" below only switch discrete
-    decisions: the chain is piecewise constant in them (zero gradient where it exists); the
-    others are differentiable (`mvedge_jax.pipeline.DIFFERENTIABLE`).
+class CentreConfig(eqx.Module):
+    """Centre-view diffusion of the edge labels (`ReconstructConfig.centre`).
 
     Attributes:
         omega: ``ω`` of the centre data weight ``ω · exp(a · λ_e)`` (eq 6.3; thesis 150).
@@ -31,33 +27,48 @@ class ReconstructConfig(eqx.Module):
         lambda_e_max: ``λ_e`` is clipped to ``[0, lambda_e_max]`` before the exponential.
         offset_scale: labels are splatted at ``p + offset_scale · n`` (``n`` the surface
             vector, pixels).
-        centre_c: numerator of the centre smoothness ``c / (|∇I| + ε)``.
-        centre_eps: ``ε`` of the centre smoothness, in guide units (see ``colour_space``).
+        c: numerator of the centre smoothness ``c / (|∇I| + ε)``.
+        eps: ``ε`` of the centre smoothness, in guide units (see
+            ``ReconstructConfig.colour_space``).
         conf_beta: depth-edge confidence attenuation: smoothness across an edge is divided by
             ``1 + conf_beta · conf`` (``conf`` the larger confidence of the two pixels).
+        upsample: (static) solve the centre problem on an ``upsample×`` grid (1 or 2) and
+            average back (sub-pixel label placement).
+        solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
+
+    The array fields are all differentiable.
+
+    Raises:
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range.
+
+    References:
+        Thesis Ch. 6, eqs 6.1–6.3.
+    """
+
+    omega: Array = hyperparameter(150.0, differentiable=True, lower=0.0)
+    a: Array = hyperparameter(3.0, differentiable=True)
+    lambda_e_max: Array = hyperparameter(2.0, differentiable=True, lower=0.0)
+    offset_scale: Array = hyperparameter(1.0, differentiable=True)
+    c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
+    conf_beta: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
+    upsample: int = static(1, lower=1, upper=2)
+    solver: SolverConfig = SolverConfig()
+
+    def __check_init__(self):
+        check_fields(self)
+
+
+class SharpenConfig(eqx.Module):
+    """Sharpening of the centre map and boundary snapping / matting
+    (`ReconstructConfig.sharpen`).
+
+    Attributes (array leaves; "threshold" ones only switch discrete decisions: the chain is
+    piecewise constant in them, zero gradient where it exists):
         wmf_sigma: range parameter of the weighted median filter (guide units, RGB [0, 1]).
             The median only selects a sample, so the chain is piecewise constant in it;
-            with ``sharpen_filter = "mean"`` it is differentiable.
-        epi_data_weight: data weight on reprojected pixels (eq 6.8; thesis 15).
-        epi_centre_weight: data weight of the centre view's row of every EPI (the estimated
-            map itself; large = the centre view keeps its estimate).
-        epi_photo_sigma: colour scale (RGB) of the photometric confidence of reprojected
-            pixels (`photometric_confidence`), which multiplies ``epi_data_weight``; large =
-            off.
-        epi_hole_weight: weight, in the angular inpainting, of the background prior in
-            reprojection holes (disoccluded pixels take the farther side along the EPI's
-            spatial axis). On the synthetic default scene (9x9x160², with the other defaults)
-            3, 10 and 30 give a worst per-view MSE×100 within 0.02 of each other; 1 is worse.
-        epi_min_confidence: (threshold) a reprojected pixel (off the centre row) whose photometric
-            confidence is at most this counts as a hole in the angular inpainting: a value whose
-            colour does not match was carried across a disocclusion (a foreground value spilled onto
-            the background). 0 = every landed pixel is data (the thesis).
-        epi_line_scale: multiplier of ``λ_e`` on EPI-line pixels (eq 6.8; thesis 1).
-        epi_line_floor: minimum line weight (so that lines with ``λ_e ≈ 0`` still guide).
-        epi_occlusion_tol: (threshold) an EPI-line pixel is dropped where the reprojected disparity
-            is larger (nearer) than the line's by more than this (the line is occluded there).
-        epi_c: numerator ``c`` of the EPI smoothness (eq 6.7; thesis 0.1).
-        epi_eps: ``ε`` of eq 6.7, guide units.
+            with ``filter = "mean"`` it is differentiable.
         refine_jump: (threshold) photo-consistent boundary snapping (`photo_refine`) acts where the
             disparity range of the window exceeds this (pixels per view step).
         refine_margin: (threshold) colour-cost advantage a candidate needs over the current value.
@@ -67,28 +78,10 @@ class ReconstructConfig(eqx.Module):
             background colours differ by at least this (guide units).
         matte_impure_weight: (threshold) weight of window pixels on a discontinuity in the colour
             means.
-        select_min_change: (threshold) `select_centre` tests a candidate centre map only where it
-            differs from the incumbent by more than this (pixels per view step).
-        select_margin: (threshold) colour-cost advantage the candidate needs there (L1 colour
-            units).
-        select_ssim: (threshold) weight of the SSIM dissimilarity in the cost of `select_centre`
-            (`photo_cost`'s ``ssim``; 0 = colour L1 only). 1 weighs it like eq 7.16, whose terms the
-            Ch. 7 optimisation minimises. On antinous the L1 alone cannot tell
-            disparities ±0.05 apart on the faint texture of the floor and background (the L1 error
-            of the GT and of GT − 0.05 is equal there; the SSIM term is 5% higher), and the merge
-            missed half the pixels the optimisation had fixed.
-        fill_c: smoothness numerator of the hole-filling solve of off-cross-hair views.
-        fill_data_weight: data weight of the reprojected pixels in that solve.
-        fill_hole_weight: weight, in that solve, of the background fill
-            (`background_fill`) on holes: large = holes take the farther neighbouring surface,
-            small = the colour-guided smoothness spreads the neighbours into them.
-        fill_min_confidence: (threshold) a merged pixel of an off-cross-hair view whose photometric
-            confidence is at most this counts as a hole (0 = only pixels nothing landed on).
-        upsample: solve the centre problem on an ``upsample×`` grid (1 or 2) and average
-            back (sub-pixel label placement).
-        colour_space: ``"lab"`` (CIELAB / 100) or ``"rgb"`` guide for the smoothness terms.
-        sharpen: apply the weighted median filter to the centre disparity (Sec. 6.1).
-        sharpen_filter: ``"median"`` (the weighted median filter of Sec. 6.1, which selects
+
+    Attributes (static):
+        enabled: apply the weighted median filter to the centre disparity (Sec. 6.1).
+        filter: ``"median"`` (the weighted median filter of Sec. 6.1, which selects
             one sample of the window per pixel: piecewise smooth in the disparities, piecewise
             constant in ``wmf_sigma``) or ``"mean"`` (the weighted mean with the same weights:
             its smooth surrogate, used to differentiate through the sharpening).
@@ -108,66 +101,24 @@ class ReconstructConfig(eqx.Module):
             boundaries are only pixel-accurate); ~20 ms per 512² view.
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
-        select_aggregate: radius of the colour-weighted cost aggregation of `select_centre`.
-        hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
-            (`background_fill` alone: the farthest of the nearest valid values left, right,
-            above and below) for off-cross-hair views.
-        merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
-            off-cross-hair view) or ``"mean"`` (the thesis' plain mean).
-        cross_hair_fill: in every cross-hair view but the centre, the holes of the
-            projection (as counted by ``epi_min_confidence``) take the farther of the
-            inpainted value and the 2-D `background_fill` of the view (nearest valid value
-            left, right, above and below). The EPI inpainting sees one image row or column
-            only: a disoccluded patch flanked along it by two nearer surfaces gets their
-            values there, while the background it belongs to lies beside it in the view.
-        crack_parallax: forwarded to `forward_project`.
-        solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
-        epi_solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
-            Jacobi preconditioner is much faster than the batched multigrid).
-        fill_solver: `SolverConfig` of the hole-filling solves of off-cross-hair views.
 
     Raises:
-        TypeError: on a value of the wrong type (e.g. a string for a number).
-        ValueError: on negative weights, non-positive ``ε``/``σ``, or unknown option names.
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range (e.g. an unknown filter name).
 
     References:
-        Thesis Ch. 6, eqs 6.1–6.8.
+        Thesis Sec. 6.1 (weighted median filter); the snapping and the matte are not in the
+        thesis.
     """
 
-    omega: Array = hyperparameter(150.0, differentiable=True, lower=0.0)
-    a: Array = hyperparameter(3.0, differentiable=True)
-    lambda_e_max: Array = hyperparameter(2.0, differentiable=True, lower=0.0)
-    offset_scale: Array = hyperparameter(1.0, differentiable=True)
-    centre_c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
-    centre_eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
-    conf_beta: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
     wmf_sigma: Array = hyperparameter(0.05, differentiable=True, lower=0.0, lower_open=True)
-    epi_data_weight: Array = hyperparameter(15.0, differentiable=True, lower=0.0)
-    epi_centre_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
-    epi_photo_sigma: Array = hyperparameter(0.1, differentiable=True, lower=0.0, lower_open=True)
-    epi_hole_weight: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
-    epi_min_confidence: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
-    epi_line_scale: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
-    epi_line_floor: Array = hyperparameter(0.1, differentiable=True, lower=0.0)
-    epi_occlusion_tol: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
-    epi_c: Array = hyperparameter(0.1, differentiable=True, lower=0.0)
-    epi_eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
     refine_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
-    select_min_change: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
-    select_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
-    select_ssim: Array = hyperparameter(1.0, differentiable=False, lower=0.0)
-    fill_c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
-    fill_data_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
-    fill_hole_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
-    fill_min_confidence: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
-    upsample: int = static(1, lower=1, upper=2)
-    colour_space: str = static("lab", choices=COLOUR_SPACES)
-    sharpen: bool = static(True)
-    sharpen_filter: str = static("median", choices=SHARPEN_FILTERS)
+    enabled: bool = static(True)
+    filter: str = static("median", choices=SHARPEN_FILTERS)
     wmf_radius: int = static(7, lower=1, upper=64)
     wmf_weight: str = static("exp", choices=WEIGHT_TYPES)
     wmf_iterations: int = static(10, lower=1, upper=64)
@@ -179,14 +130,184 @@ class ReconstructConfig(eqx.Module):
     matte_views: bool = static(True)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
-    select_aggregate: int = static(3, lower=0, upper=64)
+
+    def __check_init__(self):
+        check_fields(self)
+
+
+class SelectConfig(eqx.Module):
+    """Merge of an optimised centre map by `select_centre` (`ReconstructConfig.select`).
+
+    Attributes:
+        min_change: (threshold) `select_centre` tests a candidate centre map only where it
+            differs from the incumbent by more than this (pixels per view step).
+        margin: (threshold) colour-cost advantage the candidate needs there (L1 colour
+            units).
+        ssim: (threshold) weight of the SSIM dissimilarity in the cost of `select_centre`
+            (`photo_cost`'s ``ssim``; 0 = colour L1 only). 1 weighs it like eq 7.16, whose terms the
+            Ch. 7 optimisation minimises. On antinous the L1 alone cannot tell
+            disparities ±0.05 apart on the faint texture of the floor and background (the L1 error
+            of the GT and of GT − 0.05 is equal there; the SSIM term is 5% higher), and the merge
+            missed half the pixels the optimisation had fixed.
+        aggregate: (static) radius of the colour-weighted cost aggregation of `select_centre`.
+
+    Raises:
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range.
+
+    References:
+        Thesis Ch. 7 (eq 7.16); the merge itself is not in the thesis.
+    """
+
+    min_change: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
+    margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
+    ssim: Array = hyperparameter(1.0, differentiable=False, lower=0.0)
+    aggregate: int = static(3, lower=0, upper=64)
+
+    def __check_init__(self):
+        check_fields(self)
+
+
+class EpiConfig(eqx.Module):
+    """Cross-hair projection and angular inpainting of the EPIs (`ReconstructConfig.epi`).
+
+    Attributes (array leaves; "threshold" ones only switch discrete decisions, the others
+    are differentiable):
+        data_weight: data weight on reprojected pixels (eq 6.8; thesis 15).
+        centre_weight: data weight of the centre view's row of every EPI (the estimated
+            map itself; large = the centre view keeps its estimate).
+        photo_sigma: colour scale (RGB) of the photometric confidence of reprojected
+            pixels (`photometric_confidence`), which multiplies ``data_weight``; large =
+            off.
+        hole_weight: weight, in the angular inpainting, of the background prior in
+            reprojection holes (disoccluded pixels take the farther side along the EPI's
+            spatial axis). On the synthetic default scene (9x9x160², with the other defaults)
+            3, 10 and 30 give a worst per-view MSE×100 within 0.02 of each other; 1 is worse.
+        min_confidence: (threshold) a reprojected pixel (off the centre row) whose photometric
+            confidence is at most this counts as a hole in the angular inpainting: a value whose
+            colour does not match was carried across a disocclusion (a foreground value spilled onto
+            the background). 0 = every landed pixel is data (the thesis).
+        line_scale: multiplier of ``λ_e`` on EPI-line pixels (eq 6.8; thesis 1).
+        line_floor: minimum line weight (so that lines with ``λ_e ≈ 0`` still guide).
+        occlusion_tol: (threshold) an EPI-line pixel is dropped where the reprojected disparity
+            is larger (nearer) than the line's by more than this (the line is occluded there).
+        c: numerator ``c`` of the EPI smoothness (eq 6.7; thesis 0.1).
+        eps: ``ε`` of eq 6.7, guide units.
+
+    Attributes (static):
+        cross_hair_fill: in every cross-hair view but the centre, the holes of the
+            projection (as counted by ``min_confidence``) take the farther of the
+            inpainted value and the 2-D `background_fill` of the view (nearest valid value
+            left, right, above and below). The EPI inpainting sees one image row or column
+            only: a disoccluded patch flanked along it by two nearer surfaces gets their
+            values there, while the background it belongs to lies beside it in the view.
+        solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
+            Jacobi preconditioner is much faster than the batched multigrid).
+
+    Raises:
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range.
+
+    References:
+        Thesis Ch. 6, eqs 6.5–6.8.
+    """
+
+    data_weight: Array = hyperparameter(15.0, differentiable=True, lower=0.0)
+    centre_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
+    photo_sigma: Array = hyperparameter(0.1, differentiable=True, lower=0.0, lower_open=True)
+    hole_weight: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
+    min_confidence: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
+    line_scale: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    line_floor: Array = hyperparameter(0.1, differentiable=True, lower=0.0)
+    occlusion_tol: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
+    c: Array = hyperparameter(0.1, differentiable=True, lower=0.0)
+    eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
+    cross_hair_fill: bool = static(True)
+    solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
+
+    def __check_init__(self):
+        check_fields(self)
+
+
+class FillConfig(eqx.Module):
+    """Views off the cross-hair: merge of their two reprojections and hole filling
+    (`ReconstructConfig.fill`).
+
+    Attributes (array leaves; "threshold" ones only switch discrete decisions, the others
+    are differentiable):
+        c: smoothness numerator of the hole-filling solve of off-cross-hair views.
+        data_weight: data weight of the reprojected pixels in that solve.
+        hole_weight: weight, in that solve, of the background fill
+            (`background_fill`) on holes: large = holes take the farther neighbouring surface,
+            small = the colour-guided smoothness spreads the neighbours into them.
+        min_confidence: (threshold) a merged pixel of an off-cross-hair view whose photometric
+            confidence is at most this counts as a hole (0 = only pixels nothing landed on).
+
+    Attributes (static):
+        hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
+            (`background_fill` alone: the farthest of the nearest valid values left, right,
+            above and below) for off-cross-hair views.
+        merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
+            off-cross-hair view) or ``"mean"`` (the thesis' plain mean).
+        crack_parallax: forwarded to `forward_project`.
+        solver: `SolverConfig` of the hole-filling solves of off-cross-hair views.
+
+    Raises:
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range (e.g. an unknown hole fill or merge name).
+
+    References:
+        Thesis Ch. 6 (off-cross-hair views: the mean of two reprojections); the photometric
+        merge and the hole-filling solve are not in the thesis.
+    """
+
+    c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    data_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
+    hole_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
+    min_confidence: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     hole_fill: str = static("solve", choices=HOLE_FILLS)
     merge: str = static("photo", choices=MERGES)
-    cross_hair_fill: bool = static(True)
     crack_parallax: float = static(0.5, lower=0.0)
-    solver: SolverConfig = SolverConfig()
-    epi_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
-    fill_solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
+    solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
+
+    def __check_init__(self):
+        check_fields(self)
+
+
+class ReconstructConfig(eqx.Module):
+    """Configuration of the smooth 4D reconstruction, one sub-config per step of thesis
+    Ch. 6.
+
+    Array fields of the sub-configs are pytree leaves (sweep / `vmap` / differentiate
+    without recompiling); the others are static. Array fields marked "threshold" only switch
+    discrete decisions: the chain is piecewise constant in them (zero gradient where it
+    exists); the others are differentiable (`mvedge_jax.pipeline.hyperparameter_paths`).
+
+    Attributes:
+        colour_space: ``"lab"`` (CIELAB / 100) or ``"rgb"`` guide for the smoothness terms.
+        centre: `CentreConfig`: centre-view diffusion (eqs 6.1–6.3).
+        sharpen: `SharpenConfig`: sharpening of the centre map (Sec. 6.1), boundary
+            snapping and matting.
+        select: `SelectConfig`: merge of an optimised centre map (`select_centre`, Ch. 7).
+        epi: `EpiConfig`: cross-hair projection and angular inpainting (eqs 6.5–6.8).
+        fill: `FillConfig`: views off the cross-hair.
+
+    Raises:
+        TypeError: on a value of the wrong type (e.g. a number for ``colour_space``, or a
+            sub-config of the wrong class).
+        ValueError: on an unknown colour space (the sub-configs check their own fields when
+            they are built).
+
+    References:
+        Thesis Ch. 6, eqs 6.1–6.8.
+    """
+
+    colour_space: str = static("lab", choices=COLOUR_SPACES)
+    centre: CentreConfig = CentreConfig()
+    sharpen: SharpenConfig = SharpenConfig()
+    select: SelectConfig = SelectConfig()
+    epi: EpiConfig = EpiConfig()
+    fill: FillConfig = FillConfig()
 
     def __check_init__(self):
         check_fields(self)

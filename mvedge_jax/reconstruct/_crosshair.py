@@ -158,14 +158,14 @@ def inpaint_epis(
 ) -> Float[Array, "S A L"]:
     """Solve eq 6.4 on every EPI of a stack (batched `solve_poisson`).
 
-    Data weight (eq 6.8): ``epi_data_weight`` on reprojected pixels (``valid``;
-    ``epi_centre_weight`` on the centre angular row, the view the map was estimated in), the line
-    weight on EPI-line pixels that are not occluded by a reprojected value nearer by more
-    than ``epi_occlusion_tol``, 0
-    elsewhere; the terms add where they overlap. Holes (disocclusions) additionally get
-    a weak prior (``epi_hole_weight``) towards the background: the farther of the nearest
-    reprojected values to either side along the spatial axis. Smoothness (eq 6.7): ``epi_c / (|∇I| +
-    epi_eps)`` along both EPI axes (angular and spatial).
+    Data weight (eq 6.8): ``epi.data_weight`` on reprojected pixels (``valid``;
+    ``epi.centre_weight`` on the centre angular row, the view the map was estimated in), the
+    line weight on EPI-line pixels that are not occluded by a reprojected value nearer by more
+    than ``epi.occlusion_tol``, 0 elsewhere; the terms add where they overlap. Holes
+    (disocclusions) additionally get a weak prior (``epi.hole_weight``) towards the
+    background: the farther of the nearest reprojected values to either side along the
+    spatial axis. Smoothness (eq 6.7): ``epi.c / (|∇I| + epi.eps)`` along both EPI axes
+    (angular and spatial).
 
     Args:
         projected: ``(S, A, L)`` reprojected disparities (any value where not ``valid``).
@@ -175,7 +175,7 @@ def inpaint_epis(
         config: `ReconstructConfig`.
         confidence: optional ``(S, A, L)`` factor in ``[0, 1]`` on the reprojection weight
             (`photometric_confidence`); the centre row is never down-weighted. Pixels off
-            the centre row with confidence at most ``config.epi_min_confidence`` count as
+            the centre row with confidence at most ``config.epi.min_confidence`` count as
             holes (a value carried across a disocclusion).
 
     Returns:
@@ -188,29 +188,29 @@ def inpaint_epis(
     is_centre = (jnp.arange(A) == A // 2)[None, :, None]
     if confidence is not None:
         # A value whose colour does not match was carried across a disocclusion: a hole.
-        valid = valid & (is_centre | (confidence > config.epi_min_confidence))
-    occluded = valid & (projected > line_label + config.epi_occlusion_tol)
+        valid = valid & (is_centre | (confidence > config.epi.min_confidence))
+    occluded = valid & (projected > line_label + config.epi.occlusion_tol)
     lw = jnp.where(occluded, 0.0, line_weight)
     # Reprojected pixels; the centre row (the view the map was estimated in) can be pinned.
-    row_w = jnp.where(jnp.arange(A) == A // 2, config.epi_centre_weight, config.epi_data_weight)
+    row_w = jnp.where(jnp.arange(A) == A // 2, config.epi.centre_weight, config.epi.data_weight)
     cw = jnp.where(valid, row_w[None, :, None], 0.0)
     if confidence is not None:
         cw = cw * jnp.where(is_centre, 1.0, confidence)
     # Holes are disocclusions: prior = the farther of the nearest valid values along the
-    # spatial axis (the background), weight epi_hole_weight.
+    # spatial axis (the background), weight epi.hole_weight.
     bg = jax.vmap(jax.vmap(_background_1d))(projected, valid)
-    hw = jnp.where(valid, 0.0, config.epi_hole_weight)
+    hw = jnp.where(valid, 0.0, config.epi.hole_weight)
     lam = cw + lw + hw
     num = cw * jnp.where(valid, projected, 0.0) + lw * line_label + hw * bg
     pos = lam > 0
     target = jnp.where(pos, num / jnp.where(pos, lam, 1.0), 0.0)
     # Initial guess: the reprojection where valid, else the background prior.
     x0 = jnp.where(valid, projected, bg)
-    wx, wy = jax.vmap(lambda g: guide_edge_weights(g, scale=config.epi_c, eps=config.epi_eps))(
+    wx, wy = jax.vmap(lambda g: guide_edge_weights(g, scale=config.epi.c, eps=config.epi.eps))(
         epi_guide
     )
     # guide_edge_weights on an (A, L) grid: weight_x along L (A, L-1), weight_y along A (A-1, L).
-    return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi_solver).x
+    return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi.solver).x
 
 
 def edge_lines(
@@ -222,16 +222,17 @@ def edge_lines(
     """Per-point line parameters shared by the horizontal and vertical EPI stacks.
 
     Returns:
-        ``(qx, qy, weight)``: the offset centre-view position ``p + offset_scale · n`` and the
-        line weight ``max(epi_line_scale · λ_e, epi_line_floor)`` (0 for invalid points).
+        ``(qx, qy, weight)``: the offset centre-view position ``p + centre.offset_scale · n``
+        and the line weight ``max(epi.line_scale · λ_e, epi.line_floor)`` (0 for invalid
+        points).
     """
     off = jnp.asarray(offset, jnp.result_type(offset, jnp.float32))
-    qx = edges.x + config.offset_scale * off[:, 0]
-    qy = edges.y + config.offset_scale * off[:, 1]
+    qx = edges.x + config.centre.offset_scale * off[:, 0]
+    qy = edges.y + config.centre.offset_scale * off[:, 1]
     lam_e = jnp.clip(
         jnp.asarray(step_response, jnp.result_type(step_response, jnp.float32)),
         0.0,
-        config.lambda_e_max,
+        config.centre.lambda_e_max,
     )
-    w = jnp.maximum(config.epi_line_scale * lam_e, config.epi_line_floor)
+    w = jnp.maximum(config.epi.line_scale * lam_e, config.epi.line_floor)
     return qx, qy, jnp.where(edges.valid, w, 0.0)

@@ -93,7 +93,7 @@ def merge_reprojections(
     """Merge the reprojections of views ``(U//2, col)`` and ``(row, V//2)`` into view
     ``(row, col)`` (thesis Sec. 6.1, "Non-cross-hair View Reprojection").
 
-    ``config.merge == "mean"``: the mean where both land (the thesis); ``"photo"``: the mean
+    ``config.fill.merge == "mean"``: the mean where both land (the thesis); ``"photo"``: the mean
     weighted by each reprojection's `photometric_confidence` against view ``(row, col)``
     (occlusion-aware: a value whose colour does not match loses). Where only one lands, that
     one. Returns the merged map and its confidence (0 at holes; 1 or the best photometric
@@ -107,16 +107,16 @@ def merge_reprojections(
     zero = jnp.zeros((), cross_h.dtype)
     off_a = jnp.stack([dr, zero])
     off_b = jnp.stack([zero, dc])
-    cp = config.crack_parallax
+    cp = config.fill.crack_parallax
     a, va = forward_project(cross_h[col], off_a, crack_parallax=cp)
     b, vb = forward_project(cross_v[row], off_b, crack_parallax=cp)
     wa = va.astype(a.dtype)
     wb = vb.astype(a.dtype)
-    if config.merge == "photo":
+    if config.fill.merge == "photo":
         # A view missing from a partial grid (all zero) has no colour to compare with.
         present = jnp.max(views[row, col]) > 0
         target = views[row, col][None]
-        sigma = config.epi_photo_sigma
+        sigma = config.epi.photo_sigma
         pa = photometric_confidence(a[None], off_a[None], views[rc, col], target, sigma)[0]
         pb = photometric_confidence(b[None], off_b[None], views[row, cc], target, sigma)[0]
         wa = jnp.where(present, wa * jnp.maximum(pa, 1e-6), wa)
@@ -135,30 +135,31 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     ``present`` ``(U, V)``: views that exist (a partial grid's missing views are all zero and
     keep the background fill, having no guide). Returns ``(K, H, W)``.
     """
+    fc = config.fill
     # A merged value whose colour matches poorly was carried across a disocclusion: a hole.
-    valid = conf > config.fill_min_confidence
+    valid = conf > fc.min_confidence
     # Over the whole stack, outside the per-view loop: fused into the merge inside the loop,
     # the fill's gathers recomputed the merge (3.5 s against 0.3 s for 64 views at 512²).
     filled = jax.vmap(background_fill)(values, valid)
-    if config.hole_fill == "background":
+    if fc.hole_fill == "background":
         return filled
 
     def one(args):
         f, c, v, r, col = args
-        lam = jnp.where(v, config.fill_data_weight * c, config.fill_hole_weight)
-        wx, wy = guide_edge_weights(guides[r, col], scale=config.fill_c, eps=config.epi_eps)
-        solved = solve_poisson(lam, f, wx, wy, x0=f, config=config.fill_solver).x
+        lam = jnp.where(v, fc.data_weight * c, fc.hole_weight)
+        wx, wy = guide_edge_weights(guides[r, col], scale=fc.c, eps=config.epi.eps)
+        solved = solve_poisson(lam, f, wx, wy, x0=f, config=fc.solver).x
         return jnp.where(present[r, col], solved, f)
 
     return lax.map(one, (filled, conf, valid, rows, cols))
 
 
 def _cross_hair_fill(maps, valid, conf, centre: int, config: ReconstructConfig):
-    """``config.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
+    """``config.epi.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
     projection's ``valid`` and photometric confidence; entry ``centre`` is kept."""
 
     def one(m, v, c):
-        ok = v & (c > config.epi_min_confidence)
+        ok = v & (c > config.epi.min_confidence)
         return jnp.where(ok, m, jnp.minimum(m, background_fill(m, ok)))
 
     return jax.vmap(one)(maps, valid, conf).at[centre].set(maps[centre])
@@ -177,31 +178,33 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
     """`photo_refine` of view ``(row, col)`` against the cross-hair views."""
     if iterations == 0:
         return d
+    sc = config.sharpen
     offsets = ch_pos - jnp.stack([row, col]).astype(ch_pos.dtype)[None]
     return photo_refine(
         d,
         views[row, col],
         ch_views,
         offsets,
-        radius=config.refine_radius,
-        jump=config.refine_jump,
-        margin=config.refine_margin,
+        radius=sc.refine_radius,
+        jump=sc.refine_jump,
+        margin=sc.refine_margin,
         iterations=iterations,
-        aggregate=config.refine_aggregate,
+        aggregate=sc.refine_aggregate,
     )
 
 
 def _matte(d: Array, guide: Array, config: ReconstructConfig) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings."""
+    sc = config.sharpen
     return boundary_matte(
         d,
         guide,
-        radius=config.matte_radius,
-        jump=config.matte_jump,
-        spatial_sigma=config.matte_sigma,
-        impure_weight=config.matte_impure_weight,
-        min_separation=config.matte_min_separation,
+        radius=sc.matte_radius,
+        jump=sc.matte_jump,
+        spatial_sigma=sc.matte_sigma,
+        impure_weight=sc.matte_impure_weight,
+        min_separation=sc.matte_min_separation,
     )
 
 
@@ -233,31 +236,30 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
     """Step 2 of `reconstruct` (traced inline; see `sharpen`)."""
     U, V = views.shape[:2]
     rc, cc = U // 2, V // 2
+    sc = config.sharpen
     sharp = centre
-    if config.refine:
+    if sc.refine:
         ch_views, ch_pos = _cross_hair_views(views)
         rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
-        sharp = _refine(
-            sharp, rc_j, cc_j, views, ch_views, ch_pos, config, config.refine_iterations
-        )
-    if config.matte:
+        sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
+    if sc.matte:
         sharp = _matte(sharp, colour_guide(views[rc, cc], config.colour_space), config)
-    if config.sharpen and config.sharpen_filter == "mean":
+    if sc.enabled and sc.filter == "mean":
         sharp = weighted_mean_filter(
             sharp,
             views[rc, cc],
-            radius=config.wmf_radius,
-            sigma=config.wmf_sigma,
-            weight_type=config.wmf_weight,
+            radius=sc.wmf_radius,
+            sigma=sc.wmf_sigma,
+            weight_type=sc.wmf_weight,
         )
-    elif config.sharpen:
+    elif sc.enabled:
         sharp = weighted_median_filter(
             sharp,
             views[rc, cc],
-            radius=config.wmf_radius,
-            sigma=config.wmf_sigma,
-            weight_type=config.wmf_weight,
-            iterations=config.wmf_iterations,
+            radius=sc.wmf_radius,
+            sigma=sc.wmf_sigma,
+            weight_type=sc.wmf_weight,
+            iterations=sc.wmf_iterations,
         )
     return sharp
 
@@ -270,12 +272,12 @@ def sharpen(
 ) -> Float[Array, "H W"]:
     """Sharpen a centre-view disparity map at depth discontinuities (step 2 of `reconstruct`).
 
-    With ``config.refine``: pixels next to depth discontinuities are snapped to the
+    With ``config.sharpen.refine``: pixels next to depth discontinuities are snapped to the
     photo-consistent side with the cross-hair views (`photo_refine`; not in the thesis: it
     removes the foreground halos that labels on the wrong side of an occlusion edge leave).
-    With ``config.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
+    With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
     its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
-    ``config.sharpen``: `weighted_median_filter` guided by the centre view (thesis
+    ``config.sharpen.enabled``: `weighted_median_filter` guided by the centre view (thesis
     Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result).
     All off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
 
@@ -283,7 +285,7 @@ def sharpen(
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
         centre_disparity: ``(H, W)`` float disparity of the centre view ``(U//2, V//2)``,
             pixels per view step.
-        config: `ReconstructConfig` (``refine*``, ``matte*``, ``sharpen``, ``wmf_*``).
+        config: `ReconstructConfig` (its ``sharpen`` sub-config, and ``colour_space``).
 
     Returns:
         ``(H, W)`` float32 sharpened disparity.
@@ -308,10 +310,10 @@ def select_centre(
     """Merge two centre-view disparity maps pixel by pixel by photo-consistency with the
     cross-hair views (`photo_select`; not in the thesis).
 
-    Where ``candidate`` differs from ``incumbent`` by more than ``config.select_min_change``
+    Where ``candidate`` differs from ``incumbent`` by more than ``config.select.min_change``
     and has the lower occlusion-aware colour cost (`photo_cost`: colour L1 plus
-    ``config.select_ssim`` times the SSIM dissimilarity; by ``config.select_margin``,
-    aggregated over a ``(2 select_aggregate + 1)²`` colour-weighted window), it wins;
+    ``config.select.ssim`` times the SSIM dissimilarity; by ``config.select.margin``,
+    aggregated over a ``(2 select.aggregate + 1)²`` colour-weighted window), it wins;
     elsewhere the incumbent stays. `optimize_disparity` merges the sharpened Ch. 7 map
     (candidate) into the Ch. 6 centre map (incumbent) this way: the optimisation corrects
     gross errors at depth edges, while the Ch. 6 map keeps its fine accuracy elsewhere.
@@ -321,7 +323,7 @@ def select_centre(
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
         incumbent: ``(H, W)`` centre-view disparity (pixels per view step).
         candidate: ``(H, W)`` alternative centre-view disparity.
-        config: `ReconstructConfig` (``select_*``).
+        config: `ReconstructConfig` (its ``select`` sub-config).
 
     Returns:
         ``(merged (H, W) float32, took (H, W) bool)``: where ``took``, the candidate's value.
@@ -345,10 +347,10 @@ def select_centre(
         views[rc, cc],
         ch_views,
         offsets,
-        min_change=config.select_min_change,
-        margin=config.select_margin,
-        aggregate=config.select_aggregate,
-        ssim=config.select_ssim,
+        min_change=config.select.min_change,
+        margin=config.select.margin,
+        aggregate=config.select.aggregate,
+        ssim=config.select.ssim,
     )
 
 
@@ -367,7 +369,7 @@ def _propagate(
     # inside `lax.map` is ~6x slower on XLA's CPU backend (35 ms against 5 ms per 512² view).
     guides = colour_guide(views, config.colour_space)
     present = jnp.max(views, axis=(2, 3, 4)) > 0  # (U, V): views missing from a partial grid
-    ph, vh, pv, vv = project_cross_hair(centre, (U, V), crack_parallax=config.crack_parallax)
+    ph, vh, pv, vv = project_cross_hair(centre, (U, V), crack_parallax=config.fill.crack_parallax)
 
     qx, qy, lw = edge_lines(edges, surface.offset, surface.step_response, config)
     d = edges.disparity
@@ -379,8 +381,8 @@ def _propagate(
     zv, zu = jnp.zeros((V,)), jnp.zeros((U,))
     off_h = jnp.stack([zv, jnp.arange(V) - cc], axis=1).astype(views.dtype)
     off_v = jnp.stack([jnp.arange(U) - rc, zu], axis=1).astype(views.dtype)
-    ch = photometric_confidence(ph, off_h, centre_view, views[rc], config.epi_photo_sigma)
-    cv = photometric_confidence(pv, off_v, centre_view, views[:, cc], config.epi_photo_sigma)
+    ch = photometric_confidence(ph, off_h, centre_view, views[rc], config.epi.photo_sigma)
+    cv = photometric_confidence(pv, off_v, centre_view, views[:, cc], config.epi.photo_sigma)
     eh = inpaint_epis(
         jnp.transpose(ph, (1, 0, 2)),
         jnp.transpose(vh, (1, 0, 2)),
@@ -401,7 +403,7 @@ def _propagate(
     )
     cross_h = jnp.transpose(eh, (1, 0, 2))  # (V, H, W)
     cross_v = jnp.transpose(ev, (1, 2, 0))  # (U, H, W)
-    if config.cross_hair_fill:
+    if config.epi.cross_hair_fill:
         cross_h = _cross_hair_fill(cross_h, vh, ch, cc, config)
         cross_v = _cross_hair_fill(cross_v, vv, cv, rc, config)
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
@@ -421,7 +423,7 @@ def _propagate(
         )
         off = _fill_views(vals, conf, guides, present, rows_j, cols_j, config)
         disparity = disparity.at[rows_j, cols_j].set(off)
-    if config.matte_views:
+    if config.sharpen.matte_views:
         # Every view but the centre (whose map was sharpened before the projection).
         others = np.nonzero((np.arange(U)[:, None] != rc) | (np.arange(V)[None, :] != cc))
         r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
@@ -452,19 +454,19 @@ def propagate(
        (z-buffer: the larger disparity, nearer, wins; holes stay holes).
     2. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
        every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
-       ``epi_data_weight`` on reprojected pixels (times their photometric confidence),
+       ``epi.data_weight`` on reprojected pixels (times their photometric confidence),
        ``λ_e`` on the rasterised EPI lines of all edge points (including points not visible
-       in the centre view), smoothness ``epi_c / (|∇I_EPI| + epi_eps)``; one batched
+       in the centre view), smoothness ``epi.c / (|∇I_EPI| + epi.eps)``; one batched
        `solve_poisson` per direction. Reprojected pixels whose colour does not match
-       (photometric confidence ≤ ``epi_min_confidence``) count as holes. With
-       ``config.cross_hair_fill``, the holes of each cross-hair view then take the farther of
-       their inpainted value and the view's 2-D `background_fill`.
+       (photometric confidence ≤ ``epi.min_confidence``) count as holes. With
+       ``config.epi.cross_hair_fill``, the holes of each cross-hair view then take the
+       farther of their inpainted value and the view's 2-D `background_fill`.
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
-       ``merge="photo"``); holes and pixels of confidence ≤ ``fill_min_confidence`` filled
-       (``config.hole_fill``).
-    4. With ``config.matte_views``: `boundary_matte` of every view but the centre (reprojected
-       boundaries are only pixel-accurate).
+       ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
+       filled (``config.fill.hole_fill``).
+    4. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre
+       (reprojected boundaries are only pixel-accurate).
 
     The centre view's output is the mean of its two inpainted versions (row and column), so
     it is not ``centre_disparity`` itself. Fed the ``centre_sharp`` of a `reconstruct` call
@@ -510,23 +512,24 @@ def reconstruct(
 
     1. Centre view: `centre_disparity` (eq 6.1–6.3).
     2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
-       side with the cross-hair views (`photo_refine`, ``config.refine``; not in the thesis:
-       it removes the foreground halos that labels on the wrong side of an occlusion edge
-       leave), `boundary_matte` (``config.matte``), then `weighted_median_filter` guided by
-       the centre view (``config.sharpen``).
+       side with the cross-hair views (`photo_refine`, ``config.sharpen.refine``; not in the
+       thesis: it removes the foreground halos that labels on the wrong side of an occlusion
+       edge leave), `boundary_matte` (``config.sharpen.matte``), then
+       `weighted_median_filter` guided by the centre view (``config.sharpen.enabled``).
     3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
     4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
        every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight
-       ``epi_data_weight`` on reprojected pixels, ``λ_e`` on the rasterised EPI lines of all
+       ``epi.data_weight`` on reprojected pixels, ``λ_e`` on the rasterised EPI lines of all
        edge points (including points not visible in the centre view), smoothness
-       ``epi_c / (|∇I_EPI| + epi_eps)``; one batched `solve_poisson` per direction.
+       ``epi.c / (|∇I_EPI| + epi.eps)``; one batched `solve_poisson` per direction.
        Reprojected pixels whose colour does not match count as holes; with
-       ``config.cross_hair_fill`` the holes of each cross-hair view take the farther of the
-       inpainted value and the view's 2-D `background_fill`.
+       ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the farther of
+       the inpainted value and the view's 2-D `background_fill`.
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
-       ``merge="photo"``); holes and low-confidence pixels filled (``config.hole_fill``).
-    6. With ``config.matte_views``: `boundary_matte` of every view but the centre.
+       ``fill.merge="photo"``); holes and low-confidence pixels filled
+       (``config.fill.hole_fill``).
+    6. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre.
 
     Step 2 is `sharpen` and steps 3–6 are `propagate` (each callable on its own with any
     centre map). The centre view's output is the mean of its two inpainted versions (row and

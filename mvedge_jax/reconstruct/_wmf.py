@@ -250,7 +250,7 @@ def weighted_mean_filter(
     The same window and the same guide weights ``w(p, q)`` as `weighted_median_filter`, but
     the output is ``Σ_q w(p, q) d_q / Σ_q w(p, q)``: a smooth function of the disparities and
     of ``sigma`` (the weighted median only selects one sample, so it is piecewise constant in
-    ``sigma``). `ReconstructConfig.sharpen_filter` ``"mean"`` uses it to differentiate
+    ``sigma``). `SharpenConfig.filter` ``"mean"`` uses it to differentiate
     through the sharpening step. A pixel whose window has zero weight keeps its value.
 
     Args:

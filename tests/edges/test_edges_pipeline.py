@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import equinox as eqx
@@ -14,7 +15,11 @@ from mvedge_jax.edges import (
     HORIZONTAL,
     VERTICAL,
     EdgeConfig,
+    EdgeRefineConfig,
     EdgeSet,
+    FilterConfig,
+    LabelConfig,
+    OutlierConfig,
     detect_edges,
     point_errors,
     render_sparse_disparity,
@@ -60,25 +65,22 @@ def test_plane_disparity_recovered(plane, plane_edges):
 def test_overflow_counted_and_warned_thesis_style(plane):
     # Thesis-style detection (NMS, λ = 0.2h line fitting, labels only, alignment and visibility
     # tests): runs without warnings when nothing overflows ...
-    thesis = dict(
-        nms=True,
-        lambda_frac=0.2,
-        subpixel="none",
-        min_ratio=0.0,
-        outliers=False,
-        trilateral=False,
-        gradient_alignment=True,
-        drop_invisible=True,
+    label = dict(nms=True, lambda_frac=0.2, subpixel="none", min_ratio=0.0)
+    thesis = EdgeConfig(
+        label=LabelConfig(**label),
+        outliers=OutlierConfig(enabled=False),
+        refine=EdgeRefineConfig(trilateral=False, gradient_alignment=True, drop_invisible=True),
     )
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        full = detect_edges(plane, EdgeConfig(**thesis))
+        full = detect_edges(plane, thesis)
     v = np.asarray(full.valid)
     assert v.sum() > 100 and int(full.n_dropped) == 0
     assert np.median(np.abs(np.asarray(full.disparity)[v] - 0.637)) < 0.05
     # ... and with 2 slots per EPI the strongest candidates are kept, the rest counted, warned.
     with pytest.warns(UserWarning, match="did not fit"):
-        e = detect_edges(plane, EdgeConfig(**thesis, line_capacity=2))
+        capped = dataclasses.replace(thesis, label=LabelConfig(**label, line_capacity=2))
+        e = detect_edges(plane, capped)
     assert e.capacity == 2 * (40 + 56)
     assert int(e.n_dropped) > 0
     # Every dropped candidate was an NMS maximum above min_confidence; kept ones fill the slots.
@@ -89,22 +91,22 @@ def test_overflow_counted_and_warned_thesis_style(plane):
 
 def test_bad_inputs(plane):
     with pytest.raises(ValueError, match="cannot cover|covers"):
-        detect_edges(plane, EdgeConfig(d_max=0.3))  # scene range up to 1.137
+        detect_edges(plane, EdgeConfig(filter=FilterConfig(d_max=0.3)))  # range up to 1.137
     bad = eqx.tree_at(lambda lf: lf.views, plane, plane.views.at[4, 4, 3, 3, 0].set(jnp.nan))
     with pytest.raises(ValueError, match="NaN"):
         detect_edges(bad)
     with pytest.raises(ValueError, match="at least 3"):
         LightField(views=plane.views[:2], view_mask=jnp.ones((2, 9), bool))
     with pytest.raises(ValueError, match="too much"):
-        detect_edges(plane, EdgeConfig(d_max=6.0))
+        detect_edges(plane, EdgeConfig(filter=FilterConfig(d_max=6.0)))
     with pytest.raises(ValueError):
-        EdgeConfig(subpixel="cubic")
+        LabelConfig(subpixel="cubic")
     with pytest.raises(ValueError):
-        EdgeConfig(n_filters=2)
+        FilterConfig(n_filters=2)
     with pytest.raises(ValueError):
-        EdgeConfig(line_capacity=0)
+        LabelConfig(line_capacity=0)
     with pytest.raises(ValueError):
-        EdgeConfig(presmooth_sigma=-1.0)
+        FilterConfig(presmooth_sigma=-1.0)
 
 
 def test_jit_end_to_end(plane, plane_edges):
@@ -132,15 +134,15 @@ def test_all_stages_together():
 
     plane = plane_light_field(0.637, H=24, W=40, seed=3)
     cfg = EdgeConfig(
-        nms=True,
-        lambda_frac=0.2,
-        outliers=True,
-        outlier_tau=0.0,
-        gradient_alignment=True,
-        entropy_search=True,
-        trilateral=True,
-        trilateral_radius=3,
-        multiscale=True,
+        label=LabelConfig(nms=True, lambda_frac=0.2),
+        outliers=OutlierConfig(enabled=True, tau=0.0),
+        refine=EdgeRefineConfig(
+            gradient_alignment=True,
+            entropy_search=True,
+            trilateral=True,
+            trilateral_radius=3,
+            multiscale=True,
+        ),
     )
     e = detect_edges(plane, cfg, key=jax.random.key(1))
     # fine: one slot per centre-row pixel; coarse: one per coarse pixel, repeated on 2 EPIs

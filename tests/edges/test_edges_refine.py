@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from mvedge_jax.edges import EdgeConfig, EdgeSet, detect_edges
+from mvedge_jax.edges import EdgeConfig, EdgeRefineConfig, EdgeSet, OutlierConfig, detect_edges
 from mvedge_jax.edges._global import reject_outliers, trilateral_filter
 from mvedge_jax.edges._refine import (
     alignment_cosines,
@@ -71,14 +71,12 @@ def test_outlier_rejection_counts_same_label_neighbours():
     labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
     conf = [0.1] * 6 + [0.1, 10.0]
     e = _edges(xs, ys, np.zeros(8), conf)
-    cfg = EdgeConfig(
-        outlier_test="count", outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.2
-    )
+    cfg = EdgeConfig(outliers=OutlierConfig(test="count", window_frac=1 / 3, label_tol=1, tau=0.2))
     keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
     # cluster: 0.1 * 6 / 25 = 0.024 < 0.2; isolated weak 0.1 / 25; strong 10 / 25 = 0.4 >= 0.2.
     assert keep.tolist() == [False] * 6 + [False, True]
     cfg2 = EdgeConfig(
-        outlier_test="count", outlier_window_frac=1 / 3, outlier_label_tol=1, outlier_tau=0.02
+        outliers=OutlierConfig(test="count", window_frac=1 / 3, label_tol=1, tau=0.02)
     )
     keep2 = np.asarray(reject_outliers(e, labels, (15, 15), cfg2))
     assert keep2.tolist() == [True] * 6 + [False, True]
@@ -91,7 +89,7 @@ def test_outlier_agreement_test_keeps_isolated_points_and_drops_disagreeing_ones
     ys = [5, 5, 5, 6, 6, 6, 7, 13]
     labels = jnp.array([10, 10, 11, 10, 10, 10, 30, 40])
     e = _edges(xs, ys, np.zeros(8), [0.1] * 8)
-    cfg = EdgeConfig(outlier_test="agreement", outlier_window_frac=1 / 3, outlier_min_agreement=0.3)
+    cfg = EdgeConfig(outliers=OutlierConfig(test="agreement", window_frac=1 / 3, min_agreement=0.3))
     keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
     # cluster: 6 of 7 neighbours agree; label 30: 1 of 7; isolated: 1 of 1.
     assert keep.tolist() == [True] * 6 + [False, True]
@@ -104,7 +102,7 @@ def test_trilateral_filter_smooths_within_surfaces_only():
     d = np.where(xs < 6, 0.5, 1.5) + rng.normal(0, 0.02, xs.size)  # two surfaces, noisy
     lab = np.where((xs < 6)[:, None], [[40.0, 0, 0]], [[70.0, 10, 0]])
     e = _edges(xs, ys, d, np.ones(xs.size), lab=lab)
-    cfg = EdgeConfig(trilateral_radius=3)
+    cfg = EdgeConfig(refine=EdgeRefineConfig(trilateral_radius=3))
     f = np.asarray(jax.jit(lambda e: trilateral_filter(e, (12, 12), cfg))(e))
     truth = np.where(xs < 6, 0.5, 1.5)
     assert np.abs(f - truth).mean() < 0.5 * np.abs(d - truth).mean()
@@ -112,11 +110,12 @@ def test_trilateral_filter_smooths_within_surfaces_only():
 
 
 def test_outlier_rejection_is_automatic_for_few_views():
-    # outliers=None rejects outliers only when the EPIs have <= outlier_auto_views views.
+    # outliers.enabled=None rejects outliers only when the EPIs have <= outliers.auto_views
+    # views.
     from edges_helpers import plane_light_field
 
     for U, expect_on in ((3, True), (9, False)):
         plane = plane_light_field(0.637, U=U, H=16, W=24, seed=2)
-        cfg = EdgeConfig(outlier_min_agreement=1.01)  # would reject every point
+        cfg = EdgeConfig(outliers=OutlierConfig(min_agreement=1.01))  # would reject every point
         n = int(np.asarray(detect_edges(plane, cfg).valid).sum())
         assert (n == 0) == expect_on, (U, n)

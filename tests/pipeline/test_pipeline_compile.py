@@ -33,7 +33,7 @@ def test_second_call_and_new_hyperparameters_do_not_recompile(small):
     n = STAGE_CACHE.compilations
     again = estimate_disparity(small, config)
     changed = replace_paths(
-        config, {"reconstruct.omega": jnp.asarray(20.0), "edges.presmooth_sigma": 1.3}
+        config, {"reconstruct.centre.omega": jnp.asarray(20.0), "edges.filter.presmooth_sigma": 1.3}
     )
     other = estimate_disparity(small, changed)
     assert STAGE_CACHE.compilations == n
@@ -59,23 +59,25 @@ def test_sweep_equals_separate_runs(small):
     centres = sweep(
         small.views,
         config,
-        {"reconstruct.omega": omegas},
+        {"reconstruct.centre.omega": omegas},
         key=jax.random.key(0),
         d_max=d_max,
     )
     assert centres.shape == (3, 32, 32)
     for i, w in enumerate(omegas):
-        one = estimate_disparity(small, replace_paths(config, {"reconstruct.omega": w}))
+        one = estimate_disparity(small, replace_paths(config, {"reconstruct.centre.omega": w}))
         np.testing.assert_allclose(
             np.asarray(centres[i]), np.asarray(one.disparity[2, 2]), rtol=0, atol=1e-4
         )
     with pytest.raises(ValueError, match="static field"):
-        sweep(small.views, config, {"edges.n_filters": [3.0]}, key=jax.random.key(0), d_max=1.0)
+        sweep(
+            small.views, config, {"edges.filter.n_filters": [3.0]}, key=jax.random.key(0), d_max=1.0
+        )
     with pytest.raises(ValueError, match="same length"):
         sweep(
             small.views,
             config,
-            {"reconstruct.omega": [1.0, 2.0], "reconstruct.a": [1.0]},
+            {"reconstruct.centre.omega": [1.0, 2.0], "reconstruct.centre.a": [1.0]},
             key=jax.random.key(0),
             d_max=1.0,
         )

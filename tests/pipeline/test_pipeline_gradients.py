@@ -11,8 +11,6 @@ differences are not limited by the solver's tolerance.
 
 from __future__ import annotations
 
-import dataclasses
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -26,6 +24,7 @@ from mvedge_jax.pipeline import (
     hyperparameter_paths,
     replace_paths,
     smooth_config,
+    with_values,
 )
 from mvedge_jax.solve import SolverConfig
 from mvedge_jax.synthetic import make_scene
@@ -41,18 +40,17 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
     bank, λ_e clipped for some points, splat offsets off the pixel grid)."""
     tight = SolverConfig(rtol=1e-12, max_iters=5000)
     tight_j = SolverConfig(preconditioner="jacobi", rtol=1e-12, max_iters=20000)
-    return dataclasses.replace(
+    return with_values(
         config,
-        edges=dataclasses.replace(config.edges, aa_sigma=0.3),
-        surface=dataclasses.replace(config.surface, solver=tight),
-        reconstruct=dataclasses.replace(
-            config.reconstruct,
-            lambda_e_max=0.2,
-            offset_scale=0.93,
-            solver=tight,
-            epi_solver=tight_j,
-            fill_solver=tight_j,
-        ),
+        {
+            "edges.filter.aa_sigma": 0.3,
+            "surface.solver": tight,
+            "reconstruct.centre.lambda_e_max": 0.2,
+            "reconstruct.centre.offset_scale": 0.93,
+            "reconstruct.centre.solver": tight,
+            "reconstruct.epi.solver": tight_j,
+            "reconstruct.fill.solver": tight_j,
+        },
     )
 
 
@@ -110,20 +108,19 @@ def test_chain_gradient_matches_finite_differences(chain, path):
     assert abs(ad - fd) <= RTOL * max(abs(ad), abs(fd)), f"{path}: ad {ad:.6e} fd {fd:.6e}"
 
 
-@pytest.mark.parametrize("path", ["edges.presmooth_sigma"])
+@pytest.mark.parametrize("path", ["edges.filter.presmooth_sigma"])
 def test_hard_edge_labels_gradient_matches_finite_differences(scene, path):
     """The default (hard) labels are piecewise smooth: where no discrete choice flips, their
     gradient is exact."""
     lf, views, _ = scene
-    config = PipelineConfig().edges
-    d_max = resolve_d_max(config, lf.disparity_range)
+    d_max = resolve_d_max(PipelineConfig().edges, lf.disparity_range)
     row, col = views[2], views[:, 2]
 
     def labels(v):
         e = detect_edges_arrays(
             row,
             col,
-            dataclasses.replace(config, **{path.split(".")[1]: v}),
+            replace_paths(PipelineConfig(), {path: v}).edges,
             d_max=d_max,
             key=jax.random.key(0),
         )

@@ -20,6 +20,7 @@ from mvedge_jax.pipeline import (
     estimate_disparity,
     optimize_disparity,
     optimize_steps,
+    with_values,
     write_outputs,
 )
 from mvedge_jax.pipeline._driver import _optimize_diagnostics
@@ -81,7 +82,7 @@ def test_optimize_merges_with_the_initial_map(api_run):
     assert 0.0 < info["selected_fraction"] < 1.0
     assert np.mean(took) == pytest.approx(info["selected_fraction"], abs=0.01)
     # only values that differ by more than the minimum change were taken
-    min_change = float(PipelineConfig().reconstruct.select_min_change)
+    min_change = float(PipelineConfig().reconstruct.select.min_change)
     assert np.all(np.abs(sharp - initial)[took] > min_change - 1e-6)
 
 
@@ -279,19 +280,17 @@ def test_optimize_antinous_accuracy(data_dir):
 def test_optimize_backgammon_target(data_dir):
     """Full-resolution backgammon (~7 min on 2 cores for the two runs).
 
-    Default (every pixel may take the optimised value, ``select_min_change = 0``, since
+    Default (every pixel may take the optimised value, ``select.min_change = 0``, since
     session 6): the Ch. 7 target, BadPix(0.07) at least 25% below the Ch. 6 result with
     MSE×100 at most 10% worse. Measured (session 8): MSE×100 1.297 → 1.218, BadPix(0.07)
     1.744 → 1.193 (−31.6%); the price is fine accuracy, BadPix(0.01) 13.9 → 16.5 (session 7:
     1.256, 1.241, 18.7).
-    ``select_min_change = 0.02`` (the optimised value only where it moves by more than
+    ``select.min_change = 0.02`` (the optimised value only where it moves by more than
     that) keeps the fine accuracy of Ch. 6 instead, as the README says: MSE×100 1.255,
     BadPix(0.07) 1.243, BadPix(0.01) 13.0 (session 7).
     """
     default = PipelineConfig()
-    fine = dataclasses.replace(
-        default, reconstruct=dataclasses.replace(default.reconstruct, select_min_change=0.02)
-    )
+    fine = with_values(default, {"reconstruct.select.min_change": 0.02})
     folder = data_dir / "hci4d" / "stratified" / "backgammon"
     before, [(after, _), (after_fine, _)] = _centre_before_after(folder, default, fine)
     assert after["badpix_0.07"] <= 0.75 * before["badpix_0.07"], (before, after)

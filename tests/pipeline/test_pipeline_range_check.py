@@ -37,7 +37,9 @@ def test_falsified_metadata_range_is_detected(antinous, factor):
     cfg = EdgeConfig()
     d_max = resolve_d_max(cfg, lf.disparity_range)
     e = detect_edges(lf, cfg)
-    frac, warnings = check_range_saturation(lf.name, e.disparity, e.valid, d_max, cfg.n_filters)
+    frac, warnings = check_range_saturation(
+        lf.name, e.disparity, e.valid, d_max, cfg.filter.n_filters
+    )
     if factor == 1.0:
         # Measured: 0 of 11.5k points (the default d_margin keeps the range's extremes inside).
         assert frac <= MAX_SATURATED_FRACTION and warnings == []

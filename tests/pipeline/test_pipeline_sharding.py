@@ -18,7 +18,7 @@ SCRIPT = textwrap.dedent(
     lf = make_scene(7, grid=(3, 3), size=(24, 24), disparity_range=(-1.0, 1.0), n_objects=1)
     config = PipelineConfig()
     d_max = resolve_d_max(config.edges, lf.disparity_range)
-    values = {"reconstruct.omega": np.array([10.0, 150.0, 900.0])}
+    values = {"reconstruct.centre.omega": np.array([10.0, 150.0, 900.0])}
     kw = dict(key=jax.random.key(0), d_max=d_max)
     sharded = sweep(lf.views, config, values, **kw)
     single = sweep(lf.views, config, values, devices=jax.devices()[:1], **kw)

@@ -24,7 +24,7 @@ def scenes():
 
 def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     config = PipelineConfig()
-    fields = ["reconstruct.omega", "reconstruct.epi_c"]
+    fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
     seen = []
     tuned, hist = tune(
         config,
@@ -40,11 +40,13 @@ def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     assert float(hist["final_loss"]) < float(hist["loss"][0])
     for f in fields:
         assert hist[f][0] == pytest.approx(float(get_path(config, f)))
-    assert float(tuned.reconstruct.omega) != float(config.reconstruct.omega)
-    assert float(tuned.reconstruct.omega) > 0 and float(tuned.reconstruct.epi_c) > 0
+    assert float(tuned.reconstruct.centre.omega) != float(config.reconstruct.centre.omega)
+    assert float(tuned.reconstruct.centre.omega) > 0 and float(tuned.reconstruct.epi.c) > 0
     # what tune returns is what estimate_disparity and `mvedge depth --config` take
     back = config_from_toml(config_to_toml(tuned))
-    assert float(back.reconstruct.omega) == pytest.approx(float(tuned.reconstruct.omega))
+    assert float(back.reconstruct.centre.omega) == pytest.approx(
+        float(tuned.reconstruct.centre.omega)
+    )
     result = estimate_disparity(scenes[0], back)
     assert np.isfinite(np.asarray(result.disparity)).all()
 
@@ -52,13 +54,13 @@ def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
 def test_tune_rejects_bad_requests(scenes):
     config = PipelineConfig()
     with pytest.raises(ValueError, match="not differentiable"):
-        tune(config, scenes, fields=["edges.min_confidence"], steps=1)
+        tune(config, scenes, fields=["edges.label.min_confidence"], steps=1)
     with pytest.raises(ValueError, match="not differentiable"):
         tune(config, scenes, fields=["reconstruct.nope"], steps=1)
     with pytest.raises(ValueError, match="scenes is empty"):
-        tune(config, [], fields=["reconstruct.omega"], steps=1)
+        tune(config, [], fields=["reconstruct.centre.omega"], steps=1)
     with pytest.raises(ValueError, match="steps"):
-        tune(config, scenes, fields=["reconstruct.omega"], steps=-1)
+        tune(config, scenes, fields=["reconstruct.centre.omega"], steps=-1)
     no_gt = scenes[0].__class__(views=scenes[0].views, view_mask=scenes[0].view_mask)
     with pytest.raises(ValueError, match="no ground-truth"):
-        tune(config, [no_gt], fields=["reconstruct.omega"], steps=1)
+        tune(config, [no_gt], fields=["reconstruct.centre.omega"], steps=1)

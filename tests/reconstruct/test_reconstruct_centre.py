@@ -10,7 +10,15 @@ from jax.test_util import check_grads
 from reconstruct_helpers import two_region_view
 
 from mvedge_jax.edges import HORIZONTAL, EdgeSet
-from mvedge_jax.reconstruct import OracleSurface, ReconstructConfig, centre_disparity
+from mvedge_jax.reconstruct import (
+    CentreConfig,
+    EpiConfig,
+    FillConfig,
+    OracleSurface,
+    ReconstructConfig,
+    SharpenConfig,
+    centre_disparity,
+)
 from mvedge_jax.solve import SolverConfig
 
 
@@ -97,7 +105,7 @@ def test_depth_edge_confidence_blocks_leakage():
     z = jnp.zeros((n, 2))
     out = {}
     for beta in (0.0, 1000.0):
-        cfg = ReconstructConfig(conf_beta=beta)
+        cfg = ReconstructConfig(centre=CentreConfig(conf_beta=beta))
         dd = centre_disparity(edges, OracleSurface(z, jnp.ones(n), jnp.asarray(conf)), img, cfg)
         out[beta] = float(jnp.mean(jnp.abs(dd - truth)))
     assert out[1000.0] < 0.05, out
@@ -122,7 +130,8 @@ def test_centre_gradients_wrt_hyperparameters(x64):
     w = jnp.asarray(np.random.default_rng(0).normal(size=(H, W)))
 
     def loss(omega, a, c, beta):
-        cfg = ReconstructConfig(omega=omega, a=a, centre_c=c, conf_beta=beta, solver=solver)
+        centre = CentreConfig(omega=omega, a=a, c=c, conf_beta=beta, solver=solver)
+        cfg = ReconstructConfig(centre=centre)
         return jnp.sum(w * centre_disparity(edges, surface, img, cfg))
 
     args = (jnp.float64(2.0), jnp.float64(1.5), jnp.float64(0.8), jnp.float64(3.0))
@@ -133,17 +142,21 @@ def test_centre_gradients_wrt_hyperparameters(x64):
 def test_centre_vmap_over_hyperparameter(small_scene):
     lf, edges, surface = small_scene
     f = jax.vmap(
-        lambda om: centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=om))
+        lambda om: centre_disparity(
+            edges, surface, lf.centre_view, ReconstructConfig(centre=CentreConfig(omega=om))
+        )
     )
     out = f(jnp.asarray([50.0, 150.0]))
     assert out.shape == (2,) + lf.centre_gt.shape
-    single = centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(omega=50.0))
+    cfg = ReconstructConfig(centre=CentreConfig(omega=50.0))
+    single = centre_disparity(edges, surface, lf.centre_view, cfg)
     np.testing.assert_allclose(out[0], single, atol=2e-3)
 
 
 def test_centre_upsampled_grid(small_scene):
     lf, edges, surface = small_scene
-    d = centre_disparity(edges, surface, lf.centre_view, ReconstructConfig(upsample=2))
+    cfg = ReconstructConfig(centre=CentreConfig(upsample=2))
+    d = centre_disparity(edges, surface, lf.centre_view, cfg)
     assert d.shape == lf.centre_gt.shape
     assert 100 * float(jnp.mean((d - lf.centre_gt) ** 2)) < 1.0
 
@@ -161,21 +174,21 @@ def test_centre_bad_input(small_scene):
 
 
 @pytest.mark.parametrize(
-    "kwargs",
+    "cls, kwargs",
     [
-        dict(omega=-1.0),
-        dict(centre_eps=0.0),
-        dict(upsample=3),
-        dict(colour_space="hsv"),
-        dict(wmf_weight="x"),
-        dict(hole_fill="none"),
-        dict(wmf_radius=0),
-        dict(epi_c=float("nan")),
-        dict(fill_min_confidence=-0.1),
-        dict(epi_min_confidence=-0.1),
-        dict(fill_hole_weight=-1.0),
+        (CentreConfig, dict(omega=-1.0)),
+        (CentreConfig, dict(eps=0.0)),
+        (CentreConfig, dict(upsample=3)),
+        (ReconstructConfig, dict(colour_space="hsv")),
+        (SharpenConfig, dict(wmf_weight="x")),
+        (FillConfig, dict(hole_fill="none")),
+        (SharpenConfig, dict(wmf_radius=0)),
+        (EpiConfig, dict(c=float("nan"))),
+        (FillConfig, dict(min_confidence=-0.1)),
+        (EpiConfig, dict(min_confidence=-0.1)),
+        (FillConfig, dict(hole_weight=-1.0)),
     ],
 )
-def test_config_validation(kwargs):
+def test_config_validation(cls, kwargs):
     with pytest.raises(ValueError):
-        ReconstructConfig(**kwargs)
+        cls(**kwargs)

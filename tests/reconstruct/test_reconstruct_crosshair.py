@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from mvedge_jax.reconstruct import (
+    EpiConfig,
     ReconstructConfig,
     background_fill,
     inpaint_epis,
@@ -98,9 +99,8 @@ def test_epi_lines_carry_labels_the_centre_never_saw():
         xs = 30 - (a - 4) * 0.8
         assert float(lw[0, a, int(np.floor(xs))]) > 0
         assert float(ll[0, a, int(np.floor(xs))]) == pytest.approx(0.8)
-    out = np.asarray(
-        inpaint_epis(proj, valid, guide, lw, ll, ReconstructConfig(epi_hole_weight=0.0))[0]
-    )
+    cfg = ReconstructConfig(epi=EpiConfig(hole_weight=0.0))
+    out = np.asarray(inpaint_epis(proj, valid, guide, lw, ll, cfg)[0])
     assert abs(out[4, 30] - 0.8) < 0.1, out[4, 30]  # measured 0.73
     assert abs(out[4, 0]) < 0.05
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import grey_dilation, grey_erosion
 
-from mvedge_jax.reconstruct import ReconstructConfig, boundary_matte
+from mvedge_jax.reconstruct import SharpenConfig, boundary_matte
 from mvedge_jax.reconstruct._centre import colour_guide
 from mvedge_jax.synthetic import make_scene
 
@@ -86,9 +86,9 @@ def test_matte_rejects_bad_input():
     with pytest.raises(ValueError, match="spatial_sigma"):
         boundary_matte(gt, img, spatial_sigma=0.0)
     with pytest.raises(ValueError, match="matte_radius"):
-        ReconstructConfig(matte_radius=0)
+        SharpenConfig(matte_radius=0)
     with pytest.raises(ValueError, match="matte_jump"):
-        ReconstructConfig(matte_jump=-1.0)
+        SharpenConfig(matte_jump=-1.0)
 
 
 def test_matte_needs_a_neighbour_on_the_chosen_side():

@@ -12,6 +12,7 @@ from mvedge_jax.io import load_light_field
 from mvedge_jax.lightfield import ssim_map
 from mvedge_jax.reconstruct import (
     ReconstructConfig,
+    SelectConfig,
     photo_cost,
     photo_refine,
     photo_select,
@@ -105,7 +106,7 @@ def test_select_centre_matches_photo_select_with_the_cross_hair(small_scene):
     views, offsets = _cross(lf)
     gt = jnp.asarray(lf.centre_gt)
     halo = jnp.asarray(grey_dilation(np.asarray(gt), size=(5, 5)))
-    cfg = ReconstructConfig(select_min_change=0.05, select_aggregate=2)
+    cfg = ReconstructConfig(select=SelectConfig(min_change=0.05, aggregate=2))
     a, ta = select_centre(lf.views, halo, gt, cfg)
     b, tb = photo_select(
         halo, gt, lf.centre_view, views, offsets, min_change=0.05, aggregate=2, ssim=1.0
@@ -114,12 +115,12 @@ def test_select_centre_matches_photo_select_with_the_cross_hair(small_scene):
     assert np.mean(np.asarray(ta) == np.asarray(tb)) > 0.999
     with pytest.raises(ValueError, match="centre_disparity must have shape"):
         select_centre(lf.views, halo, gt[:, :-1], cfg)
-    with pytest.raises(ValueError, match="select_aggregate"):
-        ReconstructConfig(select_aggregate=-1)
-    with pytest.raises(ValueError, match="select_min_change"):
-        ReconstructConfig(select_min_change=-0.1)
-    with pytest.raises(ValueError, match="select_ssim"):
-        ReconstructConfig(select_ssim=-1.0)
+    with pytest.raises(ValueError, match=r"SelectConfig\.aggregate"):
+        SelectConfig(aggregate=-1)
+    with pytest.raises(ValueError, match=r"SelectConfig\.min_change"):
+        SelectConfig(min_change=-0.1)
+    with pytest.raises(ValueError, match=r"SelectConfig\.ssim"):
+        SelectConfig(ssim=-1.0)
 
 
 def test_photo_cost_ssim_term(small_scene):

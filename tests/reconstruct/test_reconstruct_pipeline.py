@@ -7,7 +7,15 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from mvedge_jax.reconstruct import ReconstructConfig, Reconstruction, reconstruct
+from mvedge_jax.reconstruct import (
+    CentreConfig,
+    EpiConfig,
+    FillConfig,
+    ReconstructConfig,
+    Reconstruction,
+    SharpenConfig,
+    reconstruct,
+)
 
 
 def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
@@ -28,14 +36,9 @@ def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
         (dict(), 1.8, 1.6),
         (
             dict(
-                refine=False,
-                sharpen=False,
-                matte=False,
-                matte_views=False,
-                cross_hair_fill=False,
-                epi_min_confidence=0.0,
-                fill_min_confidence=0.0,
-                fill_hole_weight=10.0,
+                sharpen=SharpenConfig(enabled=False, refine=False, matte=False, matte_views=False),
+                epi=EpiConfig(cross_hair_fill=False, min_confidence=0.0),
+                fill=FillConfig(min_confidence=0.0, hole_weight=10.0),
             ),
             2.0,
             0.5,
@@ -53,7 +56,7 @@ def test_all_views_accuracy(small_scene, kwargs, bound, centre_bound):
     assert np.all(np.isfinite(mse))
     assert mse.max() < bound, np.array2string(mse, precision=2)
     assert mse[U // 2, V // 2] < centre_bound, mse[U // 2, V // 2]
-    if kwargs.get("matte_views", True):
+    if "sharpen" not in kwargs or kwargs["sharpen"].matte_views:
         return
     # Without the per-view matting, the cross-hair outputs are the inpainted views.
     np.testing.assert_array_equal(rec.disparity[U // 2, 0], rec.cross_h[0])
@@ -63,12 +66,15 @@ def test_all_views_accuracy(small_scene, kwargs, bound, centre_bound):
 def test_hyperparameter_sweep_does_not_recompile(small_scene):
     lf, edges, surface = small_scene
     traces = []
-    cfg0 = ReconstructConfig(refine=False)
+    no_refine = SharpenConfig(refine=False)
+    cfg0 = ReconstructConfig(sharpen=no_refine)
 
     @jax.jit
-    def run(omega, epi_c):
+    def run(omega, c):
         traces.append(1)
-        cfg = ReconstructConfig(omega=omega, epi_c=epi_c, refine=False)
+        cfg = ReconstructConfig(
+            centre=CentreConfig(omega=omega), epi=EpiConfig(c=c), sharpen=no_refine
+        )
         return reconstruct(lf.views, edges, surface, cfg).disparity
 
     a = run(jnp.float32(150.0), jnp.float32(0.1))
@@ -92,7 +98,8 @@ def test_partial_grid_views_are_filled(small_scene):
     # disparity map: plain mean of the reprojections and the background fill.
     lf, edges, surface = small_scene
     views = lf.views.at[0, 0].set(0.0)
-    rec = reconstruct(views, edges, surface, ReconstructConfig(refine=False, sharpen=False))
+    cfg = ReconstructConfig(sharpen=SharpenConfig(enabled=False, refine=False))
+    rec = reconstruct(views, edges, surface, cfg)
     mse = _per_view_mse(rec, lf)
     assert np.all(np.isfinite(mse))
     assert mse[0, 0] < 2.5, mse[0, 0]

@@ -6,7 +6,13 @@ import jax
 import numpy as np
 import pytest
 
-from mvedge_jax.reconstruct import ReconstructConfig, propagate, reconstruct, sharpen
+from mvedge_jax.reconstruct import (
+    ReconstructConfig,
+    SharpenConfig,
+    propagate,
+    reconstruct,
+    sharpen,
+)
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +38,8 @@ def test_sharpen_reproduces_reconstruct(small_scene, full_run):
     out = sharpen(lf.views, full_run.centre, ReconstructConfig())
     np.testing.assert_array_equal(out, full_run.centre_sharp)
     # both steps off: the identity
-    plain = sharpen(
-        lf.views, full_run.centre, ReconstructConfig(refine=False, matte=False, sharpen=False)
-    )
+    off = ReconstructConfig(sharpen=SharpenConfig(enabled=False, refine=False, matte=False))
+    plain = sharpen(lf.views, full_run.centre, off)
     np.testing.assert_array_equal(plain, full_run.centre)
 
 
