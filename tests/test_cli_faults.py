@@ -351,7 +351,8 @@ def test_real_run_reports_solver_status_and_refuses_a_flat_scene(tmp_path):
     res = depth(scene, "--out", tmp_path / "out")
     assert res.exit_code == 0, res.output
     metrics = json.loads((tmp_path / "out" / "metrics.json").read_text())
-    assert metrics["solver"]["surface"]["status"] == "converged"
+    for stage in ("surface", "reconstruct.centre", "reconstruct.epi", "reconstruct.fill"):
+        assert metrics["solver"][stage]["status"] == "converged", stage
     assert metrics["warnings"] == []
     flat = write_scene(tmp_path / "flat")
     for k in range(9):

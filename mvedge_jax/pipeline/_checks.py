@@ -440,17 +440,19 @@ def check_disparity(name: str, disparity) -> None:
         )
 
 
-def diagnose(lf, config, edges, surface, disparity, *, d_max: float) -> dict:
+def diagnose(lf, config, edges, surface, reconstruction, *, d_max: float) -> dict:
     """Checks of a finished `estimate_disparity` run, for ``metrics.json`` and the console.
 
     Args:
         lf, config: the run's light field and `PipelineConfig`.
-        edges, surface, disparity: its edge set, surface result and ``(U, V, H, W)`` map.
+        edges, surface, reconstruction: its edge set, surface result and `Reconstruction`.
         d_max: the filter bank's half-range used (pixels per view step).
 
     Returns:
-        ``{"warnings": [str, ...], "saturated_fraction": float, "solver": {"surface":
-        {"status", "residual_max"}}}`` (`check_range_saturation` gives the fraction).
+        ``{"warnings": [str, ...], "saturated_fraction": float, "solver": {stage: {"status",
+        "residual_max"}}}`` with stages ``"surface"``, ``"reconstruct.centre"``,
+        ``"reconstruct.epi"`` and (with off-cross-hair views filled by a solve)
+        ``"reconstruct.fill"`` (`check_range_saturation` gives the fraction).
 
     Raises:
         ValueError: if there is no edge point at all, or the disparity holds NaN/Inf.
@@ -461,9 +463,19 @@ def diagnose(lf, config, edges, surface, disparity, *, d_max: float) -> dict:
     )
     warnings += more
     status, more = check_solver("surface", surface.residual, float(config.surface.solver.rtol))
-    check_disparity(lf.name, disparity)
-    return {
-        "warnings": warnings + more,
-        "saturated_fraction": saturated,
-        "solver": {"surface": status},
-    }
+    warnings += more
+    solver = {"surface": status, **reconstruct_solver_status(reconstruction, config, warnings)}
+    check_disparity(lf.name, reconstruction.disparity)
+    return {"warnings": warnings, "saturated_fraction": saturated, "solver": solver}
+
+
+def reconstruct_solver_status(reconstruction, config, warnings: list[str]) -> dict:
+    """``{"reconstruct.centre" | "reconstruct.epi" | "reconstruct.fill": {"status",
+    "residual_max"}}`` for the solves a `Reconstruction` reports (`check_solver` against each
+    stage's ``solver.rtol``); their warnings are appended to ``warnings``."""
+    out = {}
+    for stage, residual in reconstruction.solver_residual.items():
+        rtol = float(getattr(config.reconstruct, stage).solver.rtol)
+        out[f"reconstruct.{stage}"], more = check_solver(f"reconstruct.{stage}", residual, rtol)
+        warnings += more
+    return out

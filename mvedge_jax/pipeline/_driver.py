@@ -17,7 +17,13 @@ from ..lightfield import LightField
 from ..reconstruct import Reconstruction, propagate, select_centre, sharpen
 from ..surface import SurfaceResult
 from ._chain import edges_stage, reconstruct_stage, surface_stage
-from ._checks import check_compiled_memory, check_memory, check_solver, diagnose
+from ._checks import (
+    check_compiled_memory,
+    check_memory,
+    check_solver,
+    diagnose,
+    reconstruct_solver_status,
+)
 from ._compile import STAGE_CACHE
 from ._config import PipelineConfig
 
@@ -127,18 +133,20 @@ def estimate_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=compile_total,
-        diagnostics=diagnose(lf, config, edges, surface, rec.disparity, d_max=d_max),
+        diagnostics=diagnose(lf, config, edges, surface, rec, d_max=d_max),
     )
 
 
-def _optimize_diagnostics(diagnostics: dict, residuals, rtol: float) -> dict:
+def _optimize_diagnostics(diagnostics: dict, residuals, rec, config: PipelineConfig) -> dict:
     """``diagnostics`` with the status of the optimisation's Poisson solves (the worst
-    relative residual over its steps) under ``solver["optimize"]``, and its warning."""
-    status, more = check_solver("optimize", residuals, rtol)
-    out = dict(diagnostics)
-    out["warnings"] = list(out.get("warnings", [])) + more
-    out["solver"] = {**out.get("solver", {}), "optimize": status}
-    return out
+    relative residual over its steps) under ``solver["optimize"]``, the status of the
+    propagation's solves of ``rec`` (replacing the Ch. 6 ones), and their warnings."""
+    warnings = list(diagnostics.get("warnings", []))
+    status, more = check_solver("optimize", residuals, float(config.optimize.model.solver.rtol))
+    warnings += more
+    solver = {**diagnostics.get("solver", {}), "optimize": status}
+    solver.update(reconstruct_solver_status(rec, config, warnings))
+    return {**diagnostics, "warnings": warnings, "solver": solver}
 
 
 def cross_hair_others(
@@ -346,9 +354,7 @@ def optimize_disparity(
         reconstruction=rec,
         seconds_per_stage=seconds,
         compile_seconds=result.compile_seconds + compile_seconds,
-        diagnostics=_optimize_diagnostics(
-            result.diagnostics, hist["solver_residual"], float(opt.model.solver.rtol)
-        ),
+        diagnostics=_optimize_diagnostics(result.diagnostics, hist["solver_residual"], rec, config),
     )
     info = {
         "optimize_seconds": optimize_seconds,

@@ -1,6 +1,7 @@
 """Smooth 4D reconstruction from the multi-view edge model (thesis Ch. 6)."""
 
 from ._centre import centre_disparity as centre_disparity
+from ._centre import solve_centre as solve_centre
 from ._config import CentreConfig as CentreConfig
 from ._config import EpiConfig as EpiConfig
 from ._config import FillConfig as FillConfig
@@ -11,6 +12,7 @@ from ._crosshair import inpaint_epis as inpaint_epis
 from ._crosshair import photometric_confidence as photometric_confidence
 from ._crosshair import project_cross_hair as project_cross_hair
 from ._crosshair import rasterise_lines as rasterise_lines
+from ._crosshair import solve_epis as solve_epis
 from ._matte import boundary_matte as boundary_matte
 from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges

@@ -10,7 +10,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab
-from ..solve import guide_edge_weights, solve_poisson
+from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -199,12 +199,27 @@ def centre_disparity(
     References:
         Thesis Sec. 6.1, eqs 6.1–6.3; Sec. 4.2–4.3 (surface vectors, depth-edge confidence).
     """
+    return solve_centre(edges, surface, centre_view, config)[0]
+
+
+def solve_centre(
+    edges: EdgeSet,
+    surface: SurfaceResult,
+    centre_view: Float[ArrayLike, "H W 3"],
+    config: ReconstructConfig = ReconstructConfig(),
+) -> tuple[Float[Array, "H W"], SolveResult]:
+    """`centre_disparity` and the `SolveResult` of its screened-Poisson solve (on the
+    ``centre.upsample``× grid: its ``x`` is not averaged back), for convergence checks.
+
+    Args, Raises, References: as `centre_disparity`.
+    """
     _check_inputs(edges, surface, centre_view)
     centre_view = jnp.asarray(centre_view)
     if not jnp.issubdtype(centre_view.dtype, jnp.floating):
         centre_view = centre_view.astype(jnp.float32)
     lam, target, wx, wy = centre_problem(edges, surface, centre_view, config)
-    x = solve_poisson(lam, target, wx, wy, config=config.centre.solver).x
+    sol = solve_poisson(lam, target, wx, wy, config=config.centre.solver)
+    x = sol.x
     if config.centre.upsample == 2:
         x = _downsample2(x)
-    return x
+    return x, sol

@@ -8,7 +8,7 @@ from jaxtyping import Array, Bool, Float
 
 from ..edges import EdgeSet
 from ..lightfield import backward_warp_planar, forward_project
-from ..solve import guide_edge_weights, solve_poisson
+from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 
 
@@ -147,7 +147,7 @@ def _background_1d(values: Array, valid: Array) -> Array:
     return jnp.where(valid, values, jnp.where(jnp.isfinite(out), out, 0.0))
 
 
-def inpaint_epis(
+def solve_epis(
     projected: Float[Array, "S A L"],
     valid: Bool[Array, "S A L"],
     epi_guide: Float[Array, "S A L C"],
@@ -155,8 +155,9 @@ def inpaint_epis(
     line_label: Float[Array, "S A L"],
     config: ReconstructConfig,
     confidence: Float[Array, "S A L"] | None = None,
-) -> Float[Array, "S A L"]:
-    """Solve eq 6.4 on every EPI of a stack (batched `solve_poisson`).
+) -> SolveResult:
+    """Solve eq 6.4 on every EPI of a stack (batched `solve_poisson`): `inpaint_epis` with
+    the `SolveResult` (per-EPI iterations, residual and status) instead of its ``x`` alone.
 
     Data weight (eq 6.8): ``epi.data_weight`` on reprojected pixels (``valid``;
     ``epi.centre_weight`` on the centre angular row, the view the map was estimated in), the
@@ -179,7 +180,8 @@ def inpaint_epis(
             holes (a value carried across a disocclusion).
 
     Returns:
-        ``(S, A, L)`` inpainted disparity.
+        The `SolveResult`: ``x`` ``(S, A, L)`` the inpainted disparity, and per EPI ``(S,)``
+        its iterations, relative residual and status.
 
     References:
         Thesis Sec. 6.1, "Angular Inpainting", eqs 6.4–6.8.
@@ -210,7 +212,25 @@ def inpaint_epis(
         epi_guide
     )
     # guide_edge_weights on an (A, L) grid: weight_x along L (A, L-1), weight_y along A (A-1, L).
-    return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi.solver).x
+    return solve_poisson(lam, target, wx, wy, x0=x0, config=config.epi.solver)
+
+
+def inpaint_epis(
+    projected: Float[Array, "S A L"],
+    valid: Bool[Array, "S A L"],
+    epi_guide: Float[Array, "S A L C"],
+    line_weight: Float[Array, "S A L"],
+    line_label: Float[Array, "S A L"],
+    config: ReconstructConfig,
+    confidence: Float[Array, "S A L"] | None = None,
+) -> Float[Array, "S A L"]:
+    """Solve eq 6.4 on every EPI of a stack: the ``(S, A, L)`` inpainted disparity of
+    `solve_epis` (which documents the arguments and the weights).
+
+    References:
+        Thesis Sec. 6.1, "Angular Inpainting", eqs 6.4–6.8.
+    """
+    return solve_epis(projected, valid, epi_guide, line_weight, line_label, config, confidence).x
 
 
 def edge_lines(

@@ -15,14 +15,14 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from ..edges import EdgeSet
 from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
-from ._centre import _check_inputs, centre_disparity, colour_guide
+from ._centre import _check_inputs, colour_guide, solve_centre
 from ._config import ReconstructConfig
 from ._crosshair import (
     edge_lines,
-    inpaint_epis,
     photometric_confidence,
     project_cross_hair,
     rasterise_lines,
+    solve_epis,
 )
 from ._matte import boundary_matte
 from ._photo import photo_refine, photo_select
@@ -41,6 +41,11 @@ class Reconstruction(eqx.Module):
         centre_sharp: ``(H, W)`` after the weighted median filter (the projected map).
         cross_h: ``(V, H, W)`` centre row of views after angular inpainting.
         cross_v: ``(U, H, W)`` centre column of views after angular inpainting.
+        solver_residual: the largest relative residual of each stage's linear solves
+            (0-d arrays; NaN where a solve met non-finite values): ``"centre"`` (eq 6.1; not
+            in `propagate`'s output), ``"epi"`` (eq 6.4, every EPI) and ``"fill"`` (the
+            off-cross-hair hole filling; absent with ``fill.hole_fill = "background"`` or
+            without off-cross-hair views). Compare with the stage's ``solver.rtol``.
     """
 
     disparity: Float[Array, "U V H W"]
@@ -48,6 +53,7 @@ class Reconstruction(eqx.Module):
     centre_sharp: Float[Array, "H W"]
     cross_h: Float[Array, "V H W"]
     cross_v: Float[Array, "U H W"]
+    solver_residual: dict[str, Float[Array, ""]] = eqx.field(default_factory=dict)
 
 
 def _nearest_along(values: Array, valid: Array, axis: int, reverse: bool) -> tuple[Array, Array]:
@@ -133,7 +139,8 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     ``values``, ``conf``: ``(K, H, W)`` from `merge_reprojections` for the views
     ``(rows[k], cols[k])``; ``guides`` ``(U, V, H, W, C)``: every view's `colour_guide`;
     ``present`` ``(U, V)``: views that exist (a partial grid's missing views are all zero and
-    keep the background fill, having no guide). Returns ``(K, H, W)``.
+    keep the background fill, having no guide). Returns ``(K, H, W)`` and the ``(K,)``
+    relative residuals of the solves (None with ``hole_fill = "background"``).
     """
     fc = config.fill
     # A merged value whose colour matches poorly was carried across a disocclusion: a hole.
@@ -142,14 +149,14 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     # the fill's gathers recomputed the merge (3.5 s against 0.3 s for 64 views at 512²).
     filled = jax.vmap(background_fill)(values, valid)
     if fc.hole_fill == "background":
-        return filled
+        return filled, None
 
     def one(args):
         f, c, v, r, col = args
         lam = jnp.where(v, fc.data_weight * c, fc.hole_weight)
         wx, wy = guide_edge_weights(guides[r, col], scale=fc.c, eps=config.epi.eps)
-        solved = solve_poisson(lam, f, wx, wy, x0=f, config=fc.solver).x
-        return jnp.where(present[r, col], solved, f)
+        sol = solve_poisson(lam, f, wx, wy, x0=f, config=fc.solver)
+        return jnp.where(present[r, col], sol.x, f), jnp.where(present[r, col], sol.residual, 0)
 
     return lax.map(one, (filled, conf, valid, rows, cols))
 
@@ -360,8 +367,9 @@ def _propagate(
     edges: EdgeSet,
     surface: SurfaceResult,
     config: ReconstructConfig,
-) -> tuple[Array, Array, Array]:
-    """Steps 3–6 of `reconstruct` (traced inline; see `propagate`)."""
+) -> tuple[Array, Array, Array, dict[str, Array]]:
+    """Steps 3–6 of `reconstruct` (traced inline; see `propagate`); the last output is the
+    worst relative residual of the ``"epi"`` (and ``"fill"``) solves."""
     U, V, H, W, _ = views.shape
     rc, cc = U // 2, V // 2
     centre_view = views[rc, cc]
@@ -383,7 +391,7 @@ def _propagate(
     off_v = jnp.stack([jnp.arange(U) - rc, zu], axis=1).astype(views.dtype)
     ch = photometric_confidence(ph, off_h, centre_view, views[rc], config.epi.photo_sigma)
     cv = photometric_confidence(pv, off_v, centre_view, views[:, cc], config.epi.photo_sigma)
-    eh = inpaint_epis(
+    eh = solve_epis(
         jnp.transpose(ph, (1, 0, 2)),
         jnp.transpose(vh, (1, 0, 2)),
         gh,
@@ -392,7 +400,7 @@ def _propagate(
         config,
         jnp.transpose(ch, (1, 0, 2)),
     )
-    ev = inpaint_epis(
+    ev = solve_epis(
         jnp.transpose(pv, (2, 0, 1)),
         jnp.transpose(vv, (2, 0, 1)),
         gv,
@@ -401,8 +409,9 @@ def _propagate(
         config,
         jnp.transpose(cv, (2, 0, 1)),
     )
-    cross_h = jnp.transpose(eh, (1, 0, 2))  # (V, H, W)
-    cross_v = jnp.transpose(ev, (1, 2, 0))  # (U, H, W)
+    residual = {"epi": _worst(jnp.concatenate([eh.residual, ev.residual]))}
+    cross_h = jnp.transpose(eh.x, (1, 0, 2))  # (V, H, W)
+    cross_v = jnp.transpose(ev.x, (1, 2, 0))  # (U, H, W)
     if config.epi.cross_hair_fill:
         cross_h = _cross_hair_fill(cross_h, vh, ch, cc, config)
         cross_v = _cross_hair_fill(cross_v, vv, cv, rc, config)
@@ -421,7 +430,9 @@ def _propagate(
             lambda p: merge_reprojections(cross_h, cross_v, views, p[0], p[1], config),
             (rows_j, cols_j),
         )
-        off = _fill_views(vals, conf, guides, present, rows_j, cols_j, config)
+        off, fill_residual = _fill_views(vals, conf, guides, present, rows_j, cols_j, config)
+        if fill_residual is not None:
+            residual["fill"] = _worst(fill_residual)
         disparity = disparity.at[rows_j, cols_j].set(off)
     if config.sharpen.matte_views:
         # Every view but the centre (whose map was sharpened before the projection).
@@ -434,7 +445,12 @@ def _propagate(
             (r_j, c_j),
         )
         disparity = disparity.at[r_j, c_j].set(matted)
-    return disparity, cross_h, cross_v
+    return disparity, cross_h, cross_v, residual
+
+
+def _worst(residual: Array) -> Array:
+    """The largest of a stack of relative residuals (NaN if any is NaN), without gradient."""
+    return jnp.max(lax.stop_gradient(residual))
 
 
 @eqx.filter_jit
@@ -495,9 +511,14 @@ def propagate(
     views, centre = _check_views_and_centre(views, centre_disparity)
     U, V = views.shape[:2]
     _check_inputs(edges, surface, views[U // 2, V // 2])
-    disparity, cross_h, cross_v = _propagate(views, centre, edges, surface, config)
+    disparity, cross_h, cross_v, residual = _propagate(views, centre, edges, surface, config)
     return Reconstruction(
-        disparity=disparity, centre=centre, centre_sharp=centre, cross_h=cross_h, cross_v=cross_v
+        disparity=disparity,
+        centre=centre,
+        centre_sharp=centre,
+        cross_h=cross_h,
+        cross_v=cross_v,
+        solver_residual=residual,
     )
 
 
@@ -558,9 +579,14 @@ def reconstruct(
     centre_view = views[U // 2, V // 2]
     _check_inputs(edges, surface, centre_view)
 
-    centre = centre_disparity(edges, surface, centre_view, config)
+    centre, centre_solve = solve_centre(edges, surface, centre_view, config)
     sharp = _sharpen(views, centre, config)
-    disparity, cross_h, cross_v = _propagate(views, sharp, edges, surface, config)
+    disparity, cross_h, cross_v, residual = _propagate(views, sharp, edges, surface, config)
     return Reconstruction(
-        disparity=disparity, centre=centre, centre_sharp=sharp, cross_h=cross_h, cross_v=cross_v
+        disparity=disparity,
+        centre=centre,
+        centre_sharp=sharp,
+        cross_h=cross_h,
+        cross_v=cross_v,
+        solver_residual={"centre": _worst(centre_solve.residual), **residual},
     )

@@ -128,6 +128,16 @@ def test_backgammon_accuracy(data_dir):
     assert res.disparity.shape == (9, 9, 512, 512)
     assert m["badpix_0.07"] < 3.0, m
     assert m["mse_x100"] < 2.0, m
+    # every linear solve of the run is reported, and converged; no warning on this scene
+    diag = res.diagnostics
+    assert set(diag["solver"]) == {
+        "surface",
+        "reconstruct.centre",
+        "reconstruct.epi",
+        "reconstruct.fill",
+    }
+    assert all(s["status"] == "converged" for s in diag["solver"].values()), diag
+    assert diag["warnings"] == [] and diag["saturated_fraction"] == 0.0
 
 
 def test_antinous_accuracy(data_dir):

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from types import SimpleNamespace
 
 import equinox as eqx
 import jax
@@ -65,6 +66,8 @@ def test_optimize_returns_a_finite_result_for_every_view(api_run):
     assert info["optimize_seconds"] > 0 and info["propagate_seconds"] > 0
     # the optimisation's Poisson solves are reported beside the Ch. 6 stages'
     assert new.diagnostics["solver"]["optimize"]["status"] == "converged"
+    for stage in ("reconstruct.centre", "reconstruct.epi", "reconstruct.fill"):
+        assert new.diagnostics["solver"][stage]["status"] == "converged", stage
     assert new.diagnostics["solver"]["surface"] == res.diagnostics["solver"]["surface"]
 
 
@@ -301,13 +304,20 @@ def test_optimize_backgammon_target(data_dir):
 
 
 def test_optimize_diagnostics_report_unconverged_and_non_finite_solves():
+    config = PipelineConfig()
+    rtol = float(config.optimize.model.solver.rtol)
     base = {"warnings": ["w"], "solver": {"surface": {"status": "converged"}}}
-    ok = _optimize_diagnostics(base, np.array([1e-7, 5e-7]), 1e-6)
-    assert ok["solver"]["optimize"] == {"status": "converged", "residual_max": 5e-7}
+    rec = SimpleNamespace(solver_residual={"epi": np.float32(0.0), "fill": np.float32(0.0)})
+    ok = _optimize_diagnostics(base, np.array([0.1, 0.5]) * rtol, rec, config)
+    assert ok["solver"]["optimize"] == {"status": "converged", "residual_max": 0.5 * rtol}
+    assert ok["solver"]["reconstruct.epi"]["status"] == "converged"
     assert ok["warnings"] == ["w"] and base["warnings"] == ["w"]  # the input is not modified
-    slow = _optimize_diagnostics(base, np.array([1e-7, 3e-3]), 1e-6)
+    slow = _optimize_diagnostics(base, np.array([0.1, 3e3]) * rtol, rec, config)
     assert slow["solver"]["optimize"]["status"] == "max-steps"
     assert "optimize solve did not converge" in slow["warnings"][-1]
-    bad = _optimize_diagnostics(base, np.array([np.nan]), 1e-6)
+    rec_bad = SimpleNamespace(solver_residual={"epi": np.float32(0.0), "fill": np.float32("nan")})
+    bad = _optimize_diagnostics(base, np.array([np.nan]), rec_bad, config)
     assert bad["solver"]["optimize"]["status"] == "non-finite"
+    assert bad["solver"]["reconstruct.fill"]["status"] == "non-finite"
+    assert "reconstruct.fill solve produced NaN/Inf" in bad["warnings"][-1]
     assert bad["solver"]["surface"] == {"status": "converged"}
