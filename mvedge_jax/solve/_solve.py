@@ -18,6 +18,7 @@ import lineax as lx
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._fields import check_fields, static
 from ._multigrid import build_hierarchy, vcycle
 from ._operator import diagonal, matvec
 from ._pcg import pcg
@@ -39,23 +40,16 @@ class SolverConfig(eqx.Module):
             error is 6e-4. For a constant diagonal the two criteria coincide.)
 
     Raises:
+        TypeError: on a value of the wrong type (e.g. a string for ``max_iters``).
         ValueError: on an unknown preconditioner, ``max_iters < 1`` or ``rtol <= 0``.
     """
 
-    preconditioner: str = eqx.field(static=True, default="multigrid")
-    max_iters: int = eqx.field(static=True, default=500)
-    rtol: float = eqx.field(static=True, default=1e-5)
+    preconditioner: str = static("multigrid", choices=PRECONDITIONERS)
+    max_iters: int = static(500, lower=1)
+    rtol: float = static(1e-5, lower=0.0, lower_open=True)
 
     def __check_init__(self):
-        if self.preconditioner not in PRECONDITIONERS:
-            raise ValueError(
-                f"SolverConfig.preconditioner must be one of {PRECONDITIONERS}; "
-                f"got {self.preconditioner!r}"
-            )
-        if int(self.max_iters) < 1:
-            raise ValueError(f"SolverConfig.max_iters must be >= 1; got {self.max_iters}")
-        if not float(self.rtol) > 0:
-            raise ValueError(f"SolverConfig.rtol must be > 0; got {self.rtol}")
+        check_fields(self)
 
 
 _DEFAULT_CONFIG = SolverConfig()

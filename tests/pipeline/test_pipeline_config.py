@@ -213,3 +213,16 @@ def test_gradient_table_in_docs_matches_the_field_declarations():
     expect = {p: "smooth" for p in hyperparameter_paths(differentiable=True)}
     expect.update({p: "threshold" for p in hyperparameter_paths(differentiable=False)})
     assert table == expect
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('[reconstruct.centre.solver]\nmax_iters = "5"\n', "reconstruct.centre.solver.max_iters"),
+        ("[reconstruct.epi.solver]\nrtol = -1\n", r"\[reconstruct.epi.solver\] SolverConfig.rtol"),
+        ('[reconstruct.fill.solver]\npreconditioner = "ilu"\n', "SolverConfig.preconditioner"),
+    ],
+)
+def test_solver_tables_are_validated_like_every_config(text, message):
+    with pytest.raises(ValueError, match=message):
+        config_from_toml(text)

@@ -277,3 +277,7 @@ def test_bad_config_raises():
         SolverConfig(max_iters=0)
     with pytest.raises(ValueError, match="rtol"):
         SolverConfig(rtol=0.0)
+    with pytest.raises(TypeError, match="SolverConfig.max_iters must be an integer"):
+        SolverConfig(max_iters="5")
+    with pytest.raises(ValueError, match="SolverConfig.rtol must be finite"):
+        SolverConfig(rtol=float("nan"))
