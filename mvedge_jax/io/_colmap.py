@@ -232,6 +232,14 @@ def _data_lines(path: str):
                 yield k, s
 
 
+def _existing(path: str | os.PathLike, what: str) -> str:
+    """``path`` as a string; FileNotFoundError naming the COLMAP file (``what``) if missing."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"COLMAP {what} file not found: {path}")
+    return path
+
+
 def _require(folder: str, name: str) -> str:
     path = os.path.join(folder, name)
     if not os.path.isfile(path):
@@ -250,9 +258,7 @@ def read_colmap_cameras(path: str | os.PathLike) -> dict[int, ColmapCamera]:
         FileNotFoundError: if the file is missing.
         ValueError: on an unknown model, a wrong parameter count or a malformed line.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP cameras file not found: {path}")
+    path = _existing(path, "cameras")
     cams: dict[int, ColmapCamera] = {}
     for k, line in _data_lines(path):
         tok = line.split()
@@ -286,9 +292,7 @@ def read_colmap_images(path: str | os.PathLike) -> dict[int, ColmapImage]:
         FileNotFoundError: if the file is missing.
         ValueError: on a malformed line.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP images file not found: {path}")
+    path = _existing(path, "images")
     images: dict[int, ColmapImage] = {}
     with open(path, encoding="utf-8") as f:
         lines = [
@@ -337,9 +341,7 @@ def read_colmap_points3d(path: str | os.PathLike) -> ColmapPoints:
         FileNotFoundError: if the file is missing.
         ValueError: on a malformed line.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP points file not found: {path}")
+    path = _existing(path, "points")
     ids, xyz, rgb, err, tracks = [], [], [], [], []
     for k, line in _data_lines(path):
         tok = line.split()
@@ -505,9 +507,7 @@ def read_colmap_cameras_binary(path: str | os.PathLike) -> dict[int, ColmapCamer
         FileNotFoundError: if the file is missing.
         ValueError: on an unknown model id, invalid size or a truncated file.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP cameras file not found: {path}")
+    path = _existing(path, "cameras")
     r = _Reader(path)
     (count,) = r.unpack("Q")
     cams: dict[int, ColmapCamera] = {}
@@ -537,9 +537,7 @@ def read_colmap_images_binary(path: str | os.PathLike) -> dict[int, ColmapImage]
         FileNotFoundError: if the file is missing.
         ValueError: on a truncated or malformed file.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP images file not found: {path}")
+    path = _existing(path, "images")
     r = _Reader(path)
     (count,) = r.unpack("Q")
     images: dict[int, ColmapImage] = {}
@@ -566,9 +564,7 @@ def read_colmap_points3d_binary(path: str | os.PathLike) -> ColmapPoints:
         FileNotFoundError: if the file is missing.
         ValueError: on a truncated or malformed file.
     """
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"COLMAP points file not found: {path}")
+    path = _existing(path, "points")
     r = _Reader(path)
     (count,) = r.unpack("Q")
     ids = np.empty(count, np.int64)

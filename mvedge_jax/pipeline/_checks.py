@@ -464,18 +464,20 @@ def diagnose(lf, config, edges, surface, reconstruction, *, d_max: float) -> dic
     warnings += more
     status, more = check_solver("surface", surface.residual, float(config.surface.solver.rtol))
     warnings += more
-    solver = {"surface": status, **reconstruct_solver_status(reconstruction, config, warnings)}
+    rec_status, more = reconstruct_solver_status(reconstruction, config)
+    warnings += more
+    solver = {"surface": status, **rec_status}
     check_disparity(lf.name, reconstruction.disparity)
     return {"warnings": warnings, "saturated_fraction": saturated, "solver": solver}
 
 
-def reconstruct_solver_status(reconstruction, config, warnings: list[str]) -> dict:
-    """``{"reconstruct.centre" | "reconstruct.epi" | "reconstruct.fill": {"status",
-    "residual_max"}}`` for the solves a `Reconstruction` reports (`check_solver` against each
-    stage's ``solver.rtol``); their warnings are appended to ``warnings``."""
-    out = {}
+def reconstruct_solver_status(reconstruction, config) -> tuple[dict, list[str]]:
+    """``({"reconstruct.centre" | "reconstruct.epi" | "reconstruct.fill": {"status",
+    "residual_max"}}, warnings)`` for the solves a `Reconstruction` reports (`check_solver`
+    against each stage's ``solver.rtol``)."""
+    out, warnings = {}, []
     for stage, residual in reconstruction.solver_residual.items():
         rtol = float(getattr(config.reconstruct, stage).solver.rtol)
         out[f"reconstruct.{stage}"], more = check_solver(f"reconstruct.{stage}", residual, rtol)
         warnings += more
-    return out
+    return out, warnings

@@ -145,7 +145,9 @@ def _optimize_diagnostics(diagnostics: dict, residuals, rec, config: PipelineCon
     status, more = check_solver("optimize", residuals, float(config.optimize.model.solver.rtol))
     warnings += more
     solver = {**diagnostics.get("solver", {}), "optimize": status}
-    solver.update(reconstruct_solver_status(rec, config, warnings))
+    rec_status, more = reconstruct_solver_status(rec, config)
+    solver.update(rec_status)
+    warnings += more
     return {**diagnostics, "warnings": warnings, "solver": solver}
 
 
