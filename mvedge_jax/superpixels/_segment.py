@@ -44,7 +44,8 @@ class EPISegments(eqx.Module):
         right_pos, right_disp: ``(E, S)`` float32, its right line.
         disparity: ``(E, S)`` float32, the segment's disparity (its depth order).
         known: ``(E, S)`` bool, the disparity came from a bounding line whose surface faces
-            the segment (else it is a placeholder; see `match_lines`).
+            the segment (else it is a provisional value, replaced by `resolve_unknown`; see
+            `match_lines`).
         left_cut, right_cut: ``(E, S)`` bool, the bounding line was added by splitting (its
             disparity is the segment's).
         valid: ``(E, S)`` bool.
@@ -125,7 +126,7 @@ def match_lines(
     surface vector points into it (thesis: "the larger (deeper) slope of the two segment
     lines"). When neither line's surface faces the segment, its surface lies behind both and
     its depth is unknown here: it is marked ``known = 0`` with the smaller line disparity (or
-    ``fallback_disparity`` between two borders) as a placeholder, to be resolved from the
+    ``fallback_disparity`` between two borders) as a provisional value, resolved from the
     other EPI direction (`resolve_unknown`). Segments wider than ``config.split_width`` on the
     centre row are split into equal parts by lines ("cuts") of the segment's disparity.
 

@@ -7,6 +7,7 @@ import json
 import os
 import stat
 import threading
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
@@ -108,8 +109,12 @@ def test_unwritable_output_locations_fail_before_any_work(tmp_path, case):
         assert (tmp_path / "out.txt").read_text() == "keep me"
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores folder permissions")
 def test_read_only_folder_is_refused(tmp_path):
+    # /proc takes no new entries, not even from root
+    with pytest.raises(OutputError, match="cannot write into /proc"):
+        check_output_dir(Path("/proc") / "mvedge_out", None, force=False)
+    if os.geteuid() == 0:
+        return  # root ignores folder permissions: the /proc case above is its read-only place
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o555)
