@@ -3,12 +3,16 @@
 The driver compiles each stage once and separately from running it, so compilation time is
 reported apart from work. Array arguments, including the array fields of the configs, are
 traced: a second call with new hyperparameter values reuses the executable; a new shape,
-dtype or static field compiles a new one.
+dtype or static field compiles a new one. The package's own stages are also kept on disk as
+exported programs (`mvedge_jax._cache.StageStore`), so a new process compiles them without
+tracing them.
 """
 
 from __future__ import annotations
 
-import functools
+import dataclasses
+import inspect
+import logging
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -17,31 +21,84 @@ from typing import Any
 import equinox as eqx
 import jax
 
+from .._cache import StageStore
+
+log = logging.getLogger(__name__)
+
 
 def _aval(x) -> tuple:
     return (tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False)))
+
+
+@dataclasses.dataclass(frozen=True)
+class BoundStage:
+    """A compiled stage bound to its arguments; calling it runs the stage.
+
+    Attributes:
+        func: the `jax.stages.Compiled` executable.
+        args: its positional arguments.
+        out_tree: the result's tree structure when ``func`` returns flat leaves, else None.
+    """
+
+    func: Any
+    args: tuple
+    out_tree: Any = None
+
+    def __call__(self):
+        out = self.func(*self.args)
+        return out if self.out_tree is None else jax.tree.unflatten(self.out_tree, out)
+
+
+def _export(fn: Callable, treedef, leaves, stat, static: dict):
+    """``fn`` over flat array arguments and results, exported (`jax.export`)."""
+    box = {}
+
+    def flat(*flat_args):
+        out = fn(*eqx.combine(jax.tree.unflatten(treedef, flat_args), stat), **static)
+        out_leaves, box["tree"] = jax.tree.flatten(out)
+        return out_leaves
+
+    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    exported = jax.export.export(jax.jit(flat))(*specs)
+    return exported, box["tree"]
+
+
+def _compile_exported(exported, leaves):
+    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    return jax.jit(exported.call).lower(*specs).compile()
 
 
 class StageCache:
     """Least-recently-used store of compiled stages.
 
     Args:
-        maxsize: executables kept (each holds its compiled XLA program).
+        maxsize: executables kept in memory (each holds its compiled XLA program).
+        store: where traced stages are also kept on disk, so that a new process compiles
+            them without tracing (default: a `StageStore` beside JAX's compilation cache;
+            ``None`` keeps them in memory only). Only module-level functions of
+            `mvedge_jax` are stored: the key covers the package's source but not a
+            closure's captured values or another package's code.
+
+    Attributes:
+        compilations: stages traced and compiled by this cache.
+        loads: stages compiled from the disk store instead, without tracing.
     """
 
-    def __init__(self, maxsize: int = 32):
+    def __init__(self, maxsize: int = 32, *, store: StageStore | None = ...):
         self.maxsize = maxsize
+        self.store = StageStore() if store is ... else store
         self._entries: OrderedDict[Any, Any] = OrderedDict()
         self.compilations = 0
+        self.loads = 0
 
     def __len__(self) -> int:
         return len(self._entries)
 
     def clear(self) -> None:
-        """Forget every compiled stage."""
+        """Forget every compiled stage held in memory (the disk store is kept)."""
         self._entries.clear()
 
-    def compile(self, fn: Callable, *args, **static) -> tuple[Callable[[], Any], float]:
+    def compile(self, fn: Callable, *args, **static) -> tuple[BoundStage, float]:
         """``fn(*args, **static)`` compiled (on first use), not yet run.
 
         Args:
@@ -55,28 +112,70 @@ class StageCache:
             ``(run, compile_seconds)``: ``run()`` executes it on ``args`` (asynchronously:
             use ``jax.block_until_ready`` on its output to time the work; ``run.func`` is
             the ``jax.stages.Compiled`` executable); ``compile_seconds`` is 0 when the
-            executable was reused.
+            executable was reused from memory.
         """
         dyn, stat = eqx.partition(args, eqx.is_array)
         leaves, treedef = jax.tree.flatten(dyn)
-        key = (fn, treedef, tuple(_aval(x) for x in leaves), stat, tuple(sorted(static.items())))
-        compiled = self._entries.get(key)
+        avals = tuple(_aval(x) for x in leaves)
+        static_items = tuple(sorted(static.items()))
+        key = (fn, treedef, avals, stat, static_items)
+        entry = self._entries.get(key)
         seconds = 0.0
-        if compiled is None:
-
-            def call(dyn_args):
-                return fn(*eqx.combine(dyn_args, stat), **static)
-
+        if entry is None:
             t0 = time.perf_counter()
-            compiled = jax.jit(call).lower(dyn).compile()
+            entry = self._compile(fn, dyn, stat, static, leaves, treedef, avals, static_items)
             seconds = time.perf_counter() - t0
-            self.compilations += 1
-            self._entries[key] = compiled
+            self._entries[key] = entry
             while len(self._entries) > self.maxsize:
                 self._entries.popitem(last=False)
         else:
             self._entries.move_to_end(key)
-        return functools.partial(compiled, dyn), seconds
+        compiled, out_tree = entry
+        if out_tree is None:
+            return BoundStage(compiled, (dyn,)), seconds
+        return BoundStage(compiled, tuple(leaves), out_tree), seconds
+
+    def _compile(self, fn, dyn, stat, static, leaves, treedef, avals, static_items):
+        """``(compiled, out_tree)``: over flat leaves when the stage goes through the disk
+        store (``out_tree`` its result structure), else over ``dyn`` (``out_tree`` None)."""
+        disk_key = self._disk_key(fn, treedef, avals, stat, static_items)
+        if disk_key is not None:
+            stored = self.store.load(disk_key)
+            if stored is not None:
+                exported, out_tree = stored
+                compiled = _compile_exported(exported, leaves)
+                self.loads += 1
+                return compiled, out_tree
+            try:
+                exported, out_tree = _export(fn, treedef, leaves, stat, static)
+            except Exception as err:  # not exportable: compile it directly, in memory only
+                log.info("%s not exported (%s); compiled without the disk store", fn, err)
+            else:
+                compiled = _compile_exported(exported, leaves)
+                self.compilations += 1
+                self.store.save(disk_key, exported, out_tree)
+                return compiled, out_tree
+
+        def call(dyn_args):
+            return fn(*eqx.combine(dyn_args, stat), **static)
+
+        compiled = jax.jit(call).lower(dyn).compile()
+        self.compilations += 1
+        return compiled, None
+
+    def _disk_key(self, fn, treedef, avals, stat, static_items) -> str | None:
+        if self.store is None or self.store.path is None:
+            return None
+        name = f"{getattr(fn, '__module__', '')}.{getattr(fn, '__qualname__', '')}"
+        stored = (
+            inspect.isfunction(fn)
+            and fn.__closure__ is None
+            and "<locals>" not in fn.__qualname__
+            and name.startswith("mvedge_jax.")
+        )
+        if not stored:
+            return None
+        return self.store.key(name, f"{treedef}|{avals}", repr((stat, static_items)))
 
 
 #: The cache of `estimate_disparity` and `optimize_disparity` (one per process).
