@@ -71,14 +71,19 @@ _FORMAT = 1
 
 @functools.cache
 def _source_digest() -> str:
-    """SHA-256 of every Python file of the installed `mvedge_jax` package (path and bytes)."""
+    """SHA-256 of every Python file of the installed `mvedge_jax` package (path and bytes);
+    empty when they cannot be read (e.g. a zipped install): nothing is stored then."""
     root = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        h.update(path.relative_to(root).as_posix().encode())
-        h.update(b"\0")
-        h.update(path.read_bytes())
-    return h.hexdigest()
+    files = sorted(root.rglob("*.py"))
+    try:
+        for path in files:
+            h.update(path.relative_to(root).as_posix().encode())
+            h.update(b"\0")
+            h.update(path.read_bytes())
+    except OSError:
+        return ""
+    return h.hexdigest() if files else ""
 
 
 @functools.cache
@@ -176,14 +181,15 @@ class StageStore:
         return self._path if self._path is not None else stages_dir()
 
     def key(self, name: str, structure: str, static: str) -> str | None:
-        """Hex key of a stage, or ``None`` when ``static`` is not a stable description.
+        """Hex key of a stage, or ``None`` when ``static`` is not a stable description or the
+        package's source cannot be read.
 
         Args:
             name: the function's qualified name.
             structure: tree structure, shapes and dtypes of the array arguments.
             static: ``repr`` of the compile-time constant arguments.
         """
-        if " at 0x" in static or " object at " in static:
+        if " at 0x" in static or " object at " in static or not _source_digest():
             return None
         text = repr(
             (_FORMAT, name, structure, static, _trace_config(), _source_digest(), _host_digest())

@@ -63,6 +63,8 @@ def test_the_key_covers_shapes_static_arguments_source_and_settings(tmp_path, rg
     assert store.key("f", "s", "<Foo object at 0x7f00>") is None
     monkeypatch.setattr(_cache, "_source_digest", lambda: "edited source")
     assert store.key("f", "s", "static=1") != base
+    monkeypatch.setattr(_cache, "_source_digest", lambda: "")  # source not readable
+    assert store.key("f", "s", "static=1") is None
     monkeypatch.undo()
     jax.config.update("jax_enable_x64", True)
     try:
