@@ -332,35 +332,64 @@ def segment_epis(
     )
 
 
-def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int):
+def _spans(lp, ld, rp, rd, n_views: int, width: int):
+    """First and one-past-last integer pixel ``(.., V, S)`` of every segment in every EPI row:
+    ``left(t) <= x < right(t)`` is ``ceil(left) <= x < ceil(right)``, clipped to the EPI."""
     t = (jnp.arange(n_views) - n_views // 2).astype(jnp.float32)[:, None]
-    left = lp[None, :] - t * ld[None, :]  # (V, S)
-    right = rp[None, :] - t * rd[None, :]
-    x = jnp.arange(width, dtype=jnp.float32)[None, :, None]
-    cov = (left[:, None, :] <= x) & (x < right[:, None, :]) & valid[None, None, :]
+    left = lp[..., None, :] - t * ld[..., None, :]
+    right = rp[..., None, :] - t * rd[..., None, :]
+    x0 = jnp.clip(jnp.ceil(left), 0, width).astype(jnp.int32)
+    x1 = jnp.clip(jnp.ceil(right), 0, width).astype(jnp.int32)
+    return x0, x1
+
+
+def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int, span: int):
+    x0, x1 = _spans(lp, ld, rp, rd, n_views, width)  # (V, S)
+    V, S = x0.shape
+    xs = x0[..., None] + jnp.arange(span, dtype=jnp.int32)  # (V, S, K)
+    cov = (xs < x1[..., None]) & valid[None, :, None]
+    row = jnp.arange(V, dtype=jnp.int32)[:, None, None]
+    tgt = jnp.where(cov, row * width + xs, V * width).ravel()  # V * width: dropped
     order = jnp.where(known, disp, disp - 1e4)  # unresolved segments lie behind the rest
-    score = jnp.where(cov, order[None, None, :], -jnp.inf)
-    idx = jnp.argmax(score, axis=-1).astype(jnp.int32)
-    hit = cov.any(-1)
+    o = jnp.broadcast_to(order[None, :, None], cov.shape).ravel()
+    z = jnp.full((V * width + 1,), -jnp.inf, order.dtype).at[tgt].max(o)
+    win = cov.ravel() & (o >= z[tgt])
+    sid = jnp.broadcast_to(jnp.arange(S, dtype=jnp.int32)[None, :, None], cov.shape).ravel()
+    idx = jnp.full((V * width + 1,), S, jnp.int32).at[jnp.where(win, tgt, V * width)].min(sid)
+    idx = idx[: V * width].reshape(V, width)
+    hit = idx < S
+    idx = jnp.where(hit, idx, 0)
     return jnp.where(hit, idx, -1), jnp.where(hit, disp[idx], 0.0)
 
 
-@functools.partial(jax.jit, static_argnames=("n_views", "width", "batch_size"))
+@functools.partial(jax.jit, static_argnames=("n_views", "width", "span", "batch_size"))
+def _render(args, n_views: int, width: int, span: int, batch_size: int):
+    fn = lambda a: _render_one(*a, n_views=n_views, width=width, span=span)  # noqa: E731
+    return jax.lax.map(fn, args, batch_size=batch_size)
+
+
 def render_segments(
-    segments: EPISegments, n_views: int, width: int, batch_size: int = 32
+    segments: EPISegments, n_views: int, width: int, batch_size: int = 64
 ) -> tuple[Int[Array, "E V W"], Float[Array, "E V W"]]:
     """Label every EPI pixel with the nearest segment covering it.
 
     Pixel ``x`` of the row at view offset ``t`` is covered by a segment when
     ``left(t) <= x < right(t)`` with ``left(t) = left_pos - t left_disp`` (likewise right);
-    among covering segments the largest disparity wins (the nearest surface occludes);
-    segments whose disparity is not ``known`` lie behind all known ones.
+    among covering segments the largest disparity wins (the nearest surface occludes; ties:
+    the lowest segment index); segments whose disparity is not ``known`` lie behind all known
+    ones.
+
+    Every segment paints its pixel span of every row into a z-buffer (two scatters, max of
+    the depth order then min of the index among the winners), jitted and mapped over EPIs in
+    batches. The widest span (read on the host, rounded up to a coarse ladder) is a static
+    size, so the cost is ``O(E V S span)`` rather than ``O(E V S width)``.
 
     Args:
         segments: `EPISegments` ``(E, S)``.
         n_views: EPI height (views).
         width: EPI width (pixels).
-        batch_size: EPIs per vectorised batch (bounds memory: ``batch · V · W · S`` booleans).
+        batch_size: EPIs per vectorised batch (bounds memory: ``batch · V · S · span``
+            indices).
 
     Returns:
         ``(labels (E, V, W) int32`` segment index in ``[0, S)`` or -1 where uncovered,
@@ -369,7 +398,6 @@ def render_segments(
     References:
         Thesis Sec. 4.2.1 (regions bounded by two lines with explicit depth order).
     """
-    fn = lambda a: _render_one(*a, n_views=n_views, width=width)  # noqa: E731
     args = (
         segments.left_pos,
         segments.left_disp,
@@ -379,7 +407,12 @@ def render_segments(
         segments.known,
         segments.valid,
     )
-    return jax.lax.map(fn, args, batch_size=batch_size)
+    x0, x1 = _spans(*args[:4], n_views, width)
+    widest = int(jnp.max(jnp.where(segments.valid[:, None, :], x1 - x0, 0), initial=0))
+    span = 8
+    while span < widest:
+        span = span * 3 // 2 if span & (span - 1) == 0 else span * 4 // 3
+    return _render(args, n_views=n_views, width=width, span=span, batch_size=batch_size)
 
 
 def resolve_unknown(

@@ -57,6 +57,16 @@ def _check_lf(lf: LightField) -> None:
         raise ValueError("superpixels need the complete central row and column of views")
 
 
+def _trim(seg: EPISegments, multiple: int = 16) -> EPISegments:
+    """The same segments with the capacity cut to the largest per-EPI count (rounded up to a
+    ``multiple``, which bounds recompilation): the valid segments of an EPI come first, so
+    segment indices are unchanged and rendering costs ``O(S)`` less."""
+    S = seg.valid.shape[1]
+    n = int(np.asarray(seg.valid).sum(1).max(initial=0))
+    keep = min(S, max(multiple, -(-n // multiple) * multiple))
+    return jax.tree_util.tree_map(lambda a: a[:, :keep] if a.ndim == 2 else a, seg)
+
+
 @jax.jit
 def _segment_colours(epi_lab, labels, n_segments_dummy):
     """Mean CIELAB and pixel count per segment: ``(E, S, 3)``, ``(E, S)``."""
@@ -147,8 +157,9 @@ def _project_both(row_l, row_d, col_l, col_d):
 
 @functools.partial(jax.jit, static_argnames=("keep",))
 def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
-    """Labels of every view from both segmentations, kept where they agree (with ``keep``,
-    a disagreeing pixel keeps the nearer segmentation's label, the horizontal on ties)."""
+    """Labels ``(U, V, H, W)`` of every view from both segmentations, kept where they agree
+    (with ``keep``, a disagreeing pixel keeps the nearer segmentation's label, the horizontal
+    on ties); their disparities; and the bool mask of agreeing pixels."""
     lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
     agree = (lh >= 0) & (lh == lv)
     lab = jnp.where(agree, lh, -1)
@@ -157,7 +168,7 @@ def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
         use_v = (lv >= 0) & ((lh < 0) | (dv > dh))
         lab = jnp.where(agree, lab, jnp.where(use_v, lv, lh))
         d = jnp.where(agree, d, jnp.where(use_v, dv, dh))
-    return lab, d
+    return lab, d, agree
 
 
 @jax.jit
@@ -178,11 +189,13 @@ def _cross_offsets(U: int, V: int) -> np.ndarray:
     return np.asarray(row + col, np.float32)
 
 
-def _ends(lab_views: Array, U: int, V: int) -> tuple[Array, Array]:
-    """CIELAB and offsets of the four end views of the cross-hair (eq 5.1's comparison)."""
+def _ends(lab_row: Array, lab_col: Array) -> tuple[Array, Array]:
+    """CIELAB ``(4, H, W, 3)`` and offsets ``(4, 2)`` of the four end views of the cross-hair
+    (eq 5.1's comparison) from the centre row ``(V, H, W, 3)`` and column ``(U, H, W, 3)``."""
+    V, U = lab_row.shape[0], lab_col.shape[0]
     rc, cc = U // 2, V // 2
+    lab = jnp.stack([lab_row[0], lab_row[V - 1], lab_col[0], lab_col[U - 1]])
     idx = [(rc, 0), (rc, V - 1), (0, cc), (U - 1, cc)]
-    lab = jnp.stack([lab_views[r, c] for r, c in idx])
     off = jnp.asarray([(r - rc, c - cc) for r, c in idx], jnp.float32)
     return lab, off
 
@@ -256,6 +269,7 @@ def superpixels(
         t0 = time.perf_counter()
     seg_h = segment_epis(edges, surface_offset, HORIZONTAL, V, H, W, config)
     seg_v = segment_epis(edges, surface_offset, VERTICAL, U, W, H, config)
+    seg_h, seg_v = _trim(seg_h), _trim(seg_v)
     seconds["pairing"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)  # (H, V, W)
@@ -278,9 +292,10 @@ def superpixels(
     )
     lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)
     lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)
-    lab_views = rgb_to_lab(lf.views)
-    epi_h = jnp.transpose(lab_views[rc], (1, 0, 2, 3))  # (H, V, W, 3)
-    epi_v = jnp.transpose(lab_views[:, cc], (2, 0, 1, 3))  # (W, U, H, 3)
+    lab_row = rgb_to_lab(lf.views[rc])  # (V, H, W, 3): only the cross-hair is needed
+    lab_col = rgb_to_lab(lf.views[:, cc])  # (U, H, W, 3)
+    epi_h = jnp.transpose(lab_row, (1, 0, 2, 3))  # (H, V, W, 3)
+    epi_v = jnp.transpose(lab_col, (2, 0, 1, 3))  # (W, U, H, 3)
     col_h, cnt_h = _segment_colours(epi_h, lab_h, seg_h.disparity)
     col_v, cnt_v = _segment_colours(epi_v, lab_v, seg_v.disparity)
     jax.block_until_ready((col_h, col_v))
@@ -320,13 +335,13 @@ def superpixels(
     row_d = jnp.transpose(disp_h, (1, 0, 2))
     col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
     col_d = jnp.transpose(disp_v, (1, 2, 0))
-    consistent = float(jnp.mean(_project_agree(row_l, row_d, col_l, col_d)[0] >= 0))
-    labels, disp = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
+    labels, disp, agree = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
+    consistent = float(jnp.mean(agree))
     # Propagation on the cross-hair (eq 5.1), then into the other views, then nearest fill.
     cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
     cross_d = jnp.concatenate([disp[rc], disp[:, cc]])
-    cross_lab = jnp.concatenate([lab_views[rc], lab_views[:, cc]])
-    cmp_lab, cmp_off = _ends(lab_views, U, V)
+    cross_lab = jnp.concatenate([lab_row, lab_col])
+    cmp_lab, cmp_off = _ends(lab_row, lab_col)
     cross_l, cross_d = propagate_labels(
         cross_lab,
         cross_l,
