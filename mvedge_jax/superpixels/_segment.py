@@ -50,6 +50,10 @@ class EPISegments(eqx.Module):
             disparity is the segment's).
         valid: ``(E, S)`` bool.
         n_dropped: ``()`` int32, lines and segments lost to the capacities.
+        surface_left, surface_right: ``(E, S)`` float32 or ``None``, the disparity of the
+            segment's surface at its left and right line; a pixel's disparity is interpolated
+            linearly between them across the segment (a slanted surface). ``None``: both are
+            ``disparity`` (piece-wise constant).
     """
 
     left_pos: Float[Array, "E S"]
@@ -62,20 +66,28 @@ class EPISegments(eqx.Module):
     right_cut: Array
     valid: Array
     n_dropped: Int[Array, ""]
+    surface_left: Float[Array, "E S"] | None = None
+    surface_right: Float[Array, "E S"] | None = None
 
     def with_disparity(self, disparity: Float[Array, "E S"], known: Array) -> EPISegments:
-        """The same segments with new disparities (cut lines follow their segment's)."""
+        """The same segments with new disparities: a segment whose disparity changes becomes
+        fronto-parallel at it (its surface ends and cut lines take it)."""
+        changed = disparity != self.disparity
+        sl = self.disparity if self.surface_left is None else self.surface_left
+        sr = self.disparity if self.surface_right is None else self.surface_right
         return EPISegments(
             left_pos=self.left_pos,
-            left_disp=jnp.where(self.left_cut, disparity, self.left_disp),
+            left_disp=jnp.where(self.left_cut & changed, disparity, self.left_disp),
             right_pos=self.right_pos,
-            right_disp=jnp.where(self.right_cut, disparity, self.right_disp),
+            right_disp=jnp.where(self.right_cut & changed, disparity, self.right_disp),
             disparity=disparity,
             known=known,
             left_cut=self.left_cut,
             right_cut=self.right_cut,
             valid=self.valid,
             n_dropped=self.n_dropped,
+            surface_left=jnp.where(changed, disparity, sl),
+            surface_right=jnp.where(changed, disparity, sr),
         )
 
 
@@ -140,8 +152,8 @@ def match_lines(
         fallback_disparity: disparity of a segment bounded only by image borders.
 
     Returns:
-        ``(m, 8)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity,
-        known, left_is_cut, right_is_cut)``.
+        ``(m, 10)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity,
+        known, left_is_cut, right_is_cut, surface_left, surface_right)``.
 
     References:
         Thesis Sec. 4.2.1, Alg. 2, eq 4.7, Fig. 4.4.
@@ -194,16 +206,27 @@ def match_lines(
         else:  # the surface lies behind both lines: its depth is resolved later
             lines = [D[k] for k in (i, j) if not border[k]]
             d, known = (min(lines) if lines else fallback_disparity), 0.0
+        # The surface's disparity at each bounding line: the line's own where it lies within
+        # slant_tol of the segment's (the line is on the surface), else the segment's.
+        ends = [d, d]
+        if known and config.slant_tol > 0:
+            ends = [
+                D[k] if not border[k] and abs(D[k] - d) <= config.slant_tol else d for k in (i, j)
+            ]
         w = P[j] - P[i]
         parts = max(1, math.ceil(w / config.split_width))
-        cuts = [(P[i], D[i], 0.0)]
-        cuts += [(P[i] + w * q / parts, d, 1.0) for q in range(1, parts)]
-        cuts += [(P[j], D[j], 0.0)]
+        step = (ends[1] - ends[0]) / parts
+        cuts = [(P[i], D[i], 0.0, ends[0])]
+        cuts += [
+            (P[i] + w * q / parts, ends[0] + q * step, 1.0, ends[0] + q * step)
+            for q in range(1, parts)
+        ]
+        cuts += [(P[j], D[j], 0.0, ends[1])]
         rows += [
-            (a[0], a[1], b[0], b[1], d, known, a[2], b[2])
+            (a[0], a[1], b[0], b[1], min(a[3], b[3]), known, a[2], b[2], a[3], b[3])
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
-    return np.asarray(rows, np.float64).reshape(-1, 8)
+    return np.asarray(rows, np.float64).reshape(-1, 10)
 
 
 def _epi_lines(
@@ -302,7 +325,7 @@ def segment_epis(
     all_d = np.concatenate([dd for _, dd, _ in lines]) if lines else np.zeros(0)
     fallback = float(np.median(all_d)) if all_d.size else 0.0
     S = config.segments_per_epi(width)
-    table = np.zeros((n_epis, S, 8), np.float32)
+    table = np.zeros((n_epis, S, 10), np.float32)
     valid = np.zeros((n_epis, S), bool)
     for e, (p, d, s) in enumerate(lines):
         rows = match_lines(p, d, s, n_views, width, config, fallback)
@@ -329,6 +352,8 @@ def segment_epis(
         right_cut=t[..., 7] > 0.5,
         valid=jnp.asarray(valid),
         n_dropped=jnp.asarray(dropped, jnp.int32),
+        surface_left=t[..., 8],
+        surface_right=t[..., 9],
     )
 
 
@@ -343,7 +368,7 @@ def _spans(lp, ld, rp, rd, n_views: int, width: int):
     return x0, x1
 
 
-def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int, span: int):
+def _render_one(lp, ld, rp, rd, disp, known, valid, sl, sr, n_views: int, width: int, span: int):
     x0, x1 = _spans(lp, ld, rp, rd, n_views, width)  # (V, S)
     V, S = x0.shape
     xs = x0[..., None] + jnp.arange(span, dtype=jnp.int32)  # (V, S, K)
@@ -359,7 +384,14 @@ def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int, sp
     idx = idx[: V * width].reshape(V, width)
     hit = idx < S
     idx = jnp.where(hit, idx, 0)
-    return jnp.where(hit, idx, -1), jnp.where(hit, disp[idx], 0.0)
+    # the pixel's disparity: linear between the surface ends across the segment's row span
+    t = (jnp.arange(V) - V // 2).astype(jnp.float32)[:, None]
+    left = jnp.take_along_axis(lp[None, :] - t * ld[None, :], idx, axis=1)
+    right = jnp.take_along_axis(rp[None, :] - t * rd[None, :], idx, axis=1)
+    x = jnp.arange(width, dtype=jnp.float32)[None, :]
+    f = jnp.clip((x - left) / jnp.maximum(right - left, 1e-6), 0.0, 1.0)
+    d = sl[idx] + f * (sr[idx] - sl[idx])
+    return jnp.where(hit, idx, -1), jnp.where(hit, d, 0.0)
 
 
 @functools.partial(jax.jit, static_argnames=("n_views", "width", "span", "batch_size"))
@@ -406,6 +438,8 @@ def render_segments(
         segments.disparity,
         segments.known,
         segments.valid,
+        segments.disparity if segments.surface_left is None else segments.surface_left,
+        segments.disparity if segments.surface_right is None else segments.surface_right,
     )
     x0, x1 = _spans(*args[:4], n_views, width)
     widest = int(jnp.max(jnp.where(segments.valid[:, None, :], x1 - x0, 0), initial=0))

@@ -182,6 +182,45 @@ def _fill_from_cross(labels, disp, row_l, row_d, col_l, col_d):
     return jnp.where(take_v, lv, labels), jnp.where(take_v, dv, disp)
 
 
+@jax.jit
+def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
+    """Labels of every view from both segmentations, where they disagree settled by the
+    fully labelled centre view ``(H, W)``, and holes filled from it.
+
+    A disagreeing pixel of view ``(r, c)`` keeps the horizontal (vertical) segmentation's
+    label if that label is the centre view's at the pixel moved back to the centre by the
+    label's own disparity (both: the nearer); else it is a hole. Holes take the centre labels
+    forward-projected (z-buffered) by the centre disparity, where one lands. Returns
+    ``labels``, ``disparity`` ``(U, V, H, W)`` and the bool mask of agreeing pixels.
+    """
+    lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
+    U, V, H, W = lh.shape
+    agree = (lh >= 0) & (lh == lv)
+    dr = (jnp.arange(U) - U // 2).astype(jnp.float32)[:, None, None, None]
+    dc = (jnp.arange(V) - V // 2).astype(jnp.float32)[None, :, None, None]
+    y = jnp.arange(H, dtype=jnp.float32)[:, None]
+    x = jnp.arange(W, dtype=jnp.float32)[None, :]
+
+    def matches(lab, d):
+        cy = jnp.rint(y + dr * d).astype(jnp.int32)
+        cx = jnp.rint(x + dc * d).astype(jnp.int32)
+        inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
+        back = centre_l[jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)]
+        return (lab >= 0) & inside & (back == lab)
+
+    mh, mv = matches(lh, dh), matches(lv, dv)
+    use_v = mv & (~mh | (dv > dh))
+    keep = agree & (mh | mv)
+    lab = jnp.where(keep, lh, jnp.where(use_v, lv, jnp.where(mh, lh, -1)))
+    d = jnp.where(keep, 0.5 * (dh + dv), jnp.where(use_v, dv, jnp.where(mh, dh, 0.0)))
+    rs, cs = jnp.meshgrid(jnp.arange(U) - U // 2, jnp.arange(V) - V // 2, indexing="ij")
+    off = jnp.stack([rs.ravel(), cs.ravel()], -1).astype(jnp.float32)
+    pl, pd = jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(off)
+    pl, pd = pl.reshape(lab.shape), pd.reshape(lab.shape)
+    take = (lab < 0) & (pl >= 0)
+    return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
+
+
 def _cross_offsets(U: int, V: int) -> np.ndarray:
     rc, cc = U // 2, V // 2
     row = [(0.0, float(c - cc)) for c in range(V)]
@@ -213,7 +252,9 @@ def superpixels(
        row of views) and vertical EPI (centre column) are paired into depth-ordered segments
        (`segment_epis`, Alg. 2) and rendered into EPI label maps (`render_segments`); a segment
        whose bounding lines both face away from it (a surface seen between two nearer ones)
-       takes the other direction's disparity on the centre view (`resolve_unknown`).
+       takes the other direction's disparity on the centre view (`resolve_unknown`). With
+       ``config.slant_tol > 0`` a segment's disparity varies linearly between bounding lines
+       that lie on its surface, so every EPI pixel has its own disparity.
     2. Clustering (Sec. 5.1.1): every segment with at least one visible pixel becomes a point
        ``(x, y, d, L*, a*, b*)`` (x, y: its centre on the centre view; d: its disparity,
        normalised to [0, 1] over the scene's range; colour: the mean CIELAB of its EPI
@@ -222,12 +263,18 @@ def superpixels(
        features of the segment nearest to it in the image).
     3. Every view ``(r, c)`` receives the cluster labels of the horizontal segmentation of view
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
-       shifted horizontally, by the segments' disparities (z-buffer: nearer wins); pixels where
-       the two disagree (or that neither reaches) are unlabelled (with
-       ``config.keep_disagreeing`` a disagreeing pixel keeps the nearer one's label instead).
-    4. Label propagation (eq 5.1) on the cross-hair views, projection of those labels into the
-       other views' unlabelled pixels, and nearest-labelled-pixel fill for the rest: every
-       pixel of every view gets a label and a disparity.
+       shifted horizontally, by their pixels' disparities (z-buffer: nearer wins).
+       With ``config.centre_first`` (default, not in the thesis) the centre view is labelled
+       completely first (agreeing pixels, eq 5.1, nearest fill); a projected label is kept
+       in any view only where it equals the centre's label at the pixel moved back to the
+       centre by its disparity (a disagreement takes the segmentation that matches, both:
+       the nearer), and the remaining pixels take the centre labels forward-projected.
+       Otherwise (the thesis) pixels where the two disagree are unlabelled (with
+       ``config.keep_disagreeing`` they keep the nearer one's label instead).
+    4. Label propagation (eq 5.1) on the cross-hair views for what is still unlabelled,
+       projection of those labels into the other views' unlabelled pixels, and
+       nearest-labelled-pixel fill for the rest: every pixel of every view gets a label and
+       a disparity.
 
     The EPI pairing and k-means run on the host (SciPy / scikit-learn); rendering, projection
     and propagation are jitted and vectorised over EPIs and views.
@@ -335,13 +382,37 @@ def superpixels(
     row_d = jnp.transpose(disp_h, (1, 0, 2))
     col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
     col_d = jnp.transpose(disp_v, (1, 2, 0))
-    labels, disp, agree = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
+    cmp_lab, cmp_off = _ends(lab_row, lab_col)
+    if config.centre_first:
+        # The centre view first: its agreeing labels, eq 5.1, nearest fill; then every view's
+        # disagreements and holes are settled against it.
+        c_ok = (row_l[cc] >= 0) & (row_l[cc] == col_l[rc])
+        c_l = jnp.where(c_ok, row_l[cc], -1)[None]
+        c_d = jnp.where(c_ok, 0.5 * (row_d[cc] + col_d[rc]), 0.0)[None]
+        c_l, c_d = propagate_labels(
+            lab_row[cc][None],
+            c_l,
+            c_d,
+            jnp.zeros((1, 2), jnp.float32),
+            cmp_lab,
+            cmp_off,
+            config.w_colour,
+            config.w_spatial,
+            config.w_photo,
+            radius=config.propagation_radius,
+            passes=config.propagation_passes,
+        )
+        c_l, c_d = nearest_fill(c_l, c_d)
+        labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
+    else:
+        labels, disp, agree = _project_agree(
+            row_l, row_d, col_l, col_d, keep=config.keep_disagreeing
+        )
     consistent = float(jnp.mean(agree))
     # Propagation on the cross-hair (eq 5.1), then into the other views, then nearest fill.
     cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
     cross_d = jnp.concatenate([disp[rc], disp[:, cc]])
     cross_lab = jnp.concatenate([lab_row, lab_col])
-    cmp_lab, cmp_off = _ends(lab_row, lab_col)
     cross_l, cross_d = propagate_labels(
         cross_lab,
         cross_l,

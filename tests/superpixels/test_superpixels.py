@@ -75,7 +75,7 @@ def test_match_lines_occlusion_order():
     disp = np.array([0.0, 2.0, 0.0, 2.0, 0.0])
     side = np.array([0, 1, 0, -1, 0])  # surface vectors of F1, F2 point into the object
     rows = match_lines(pos, disp, side, 9, 64, SuperpixelConfig(split_width=64))
-    segs = {(a, b): (d, k) for a, _, b, _, d, k, _, _ in rows}
+    segs = {(a, b): (d, k) for a, _, b, _, d, k, *_ in rows}
     assert segs[(25.0, 35.0)] == (2.0, 1.0)  # the object, between its own two edges
     assert (20.0, 27.0) in segs and segs[(20.0, 27.0)][0] == 0.0  # background behind it
     assert not any(b == 25.0 for _, b in segs)  # F1 bounds nothing on its left
