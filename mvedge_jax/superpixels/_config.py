@@ -63,6 +63,9 @@ class SuperpixelConfig(eqx.Module):
             centre view does not see goes to the cross-hair propagation. False: the thesis'
             order (drop disagreements, propagate on the cross-hair). Not in the thesis; see
             docs/SUPERPIXELS.md.
+        connected: with ``centre_first``, every label keeps only its largest 4-connected
+            piece of the centre view; the other pieces are refilled by nearest fill before
+            the projection (removes scattered fragments of a cluster; not in the thesis).
         propagation_radius: label propagation (eq 5.1) looks for labelled pixels within this
             chessboard radius (pixels).
         propagation_passes: passes of the propagation; each fills unlabelled pixels within
@@ -100,6 +103,7 @@ class SuperpixelConfig(eqx.Module):
     kmeans_iters: int = eqx.field(static=True, default=20)
     keep_disagreeing: bool = eqx.field(static=True, default=False)
     centre_first: bool = eqx.field(static=True, default=True)
+    connected: bool = eqx.field(static=True, default=True)
     propagation_radius: int = eqx.field(static=True, default=2)
     propagation_passes: int = eqx.field(static=True, default=2)
     w_colour: Array = eqx.field(converter=_f32, default=1.0)

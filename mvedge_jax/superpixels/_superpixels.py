@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
@@ -221,6 +223,28 @@ def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
     return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
 
 
+def _fragments(labels: np.ndarray) -> np.ndarray:
+    """``(H, W)`` bool: the pixels outside the largest 4-connected piece of their label (SciPy
+    connected components of the graph of equal-label neighbours; ties: the first piece)."""
+    H, W = labels.shape
+    idx = np.arange(H * W).reshape(H, W)
+    right = labels[:, :-1] == labels[:, 1:]
+    down = labels[:-1] == labels[1:]
+    a = np.concatenate([idx[:, :-1][right], idx[:-1][down]])
+    b = np.concatenate([idx[:, 1:][right], idx[1:][down]])
+    graph = coo_matrix((np.ones(a.size, np.int8), (a, b)), shape=(H * W, H * W))
+    n, piece = connected_components(graph, directed=False)
+    size = np.bincount(piece, minlength=n)
+    piece_label = np.zeros(n, np.int64)
+    piece_label[piece] = labels.ravel()
+    order = np.lexsort((-size, piece_label))  # by label, the largest piece first
+    first = np.ones(n, bool)
+    first[1:] = piece_label[order][1:] != piece_label[order][:-1]
+    keep = np.zeros(n, bool)
+    keep[order[first]] = True
+    return ~keep[piece].reshape(H, W)
+
+
 def _cross_offsets(U: int, V: int) -> np.ndarray:
     rc, cc = U // 2, V // 2
     row = [(0.0, float(c - cc)) for c in range(V)]
@@ -265,7 +289,9 @@ def superpixels(
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
        shifted horizontally, by their pixels' disparities (z-buffer: nearer wins).
        With ``config.centre_first`` (default, not in the thesis) the centre view is labelled
-       completely first (agreeing pixels, eq 5.1, nearest fill); a projected label is kept
+       completely first (agreeing pixels, eq 5.1, nearest fill; with ``config.connected``
+       each label then keeps only its largest 4-connected piece, the rest refilled by
+       nearest fill); a projected label is kept
        in any view only where it equals the centre's label at the pixel moved back to the
        centre by its disparity (a disagreement takes the segmentation that matches, both:
        the nearer), and the remaining pixels take the centre labels forward-projected.
@@ -403,6 +429,9 @@ def superpixels(
             passes=config.propagation_passes,
         )
         c_l, c_d = nearest_fill(c_l, c_d)
+        if config.connected:
+            frag = _fragments(np.asarray(c_l[0]))
+            c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)
         labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
     else:
         labels, disp, agree = _project_agree(

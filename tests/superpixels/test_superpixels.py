@@ -302,6 +302,16 @@ def test_propagation_matches_pixelwise_reference():
     assert (labels < 0).sum() > (ref_l < 0).sum()  # the reference did fill holes
 
 
+def test_fragments_outside_the_largest_piece():
+    from mvedge_jax.superpixels._superpixels import _fragments
+
+    lab = np.array([[0, 0, 1, 0], [0, 1, 1, 0], [2, 2, 1, 1]])
+    expect = np.zeros(lab.shape, bool)
+    expect[0, 3] = expect[1, 3] = True  # label 0's smaller piece (diagonals do not connect)
+    np.testing.assert_array_equal(_fragments(lab), expect)
+    assert not _fragments(np.zeros((3, 5), int)).any()
+
+
 # ---- the driver on a synthetic light field -----------------------------------------------
 
 
@@ -349,29 +359,31 @@ def test_superpixels_respect_objects_and_views(scene, results):
     gt = np.asarray(lf.gt_disparity)
     asa = achievable_segmentation_accuracy(ours.labels, ids)
     assert asa > 0.9
-    # the piece-wise constant disparity (slanted floor and wall, no texture lines in the
-    # oracle edge set) is within half a pixel per view step on most pixels
+    # the disparity (slanted floor and wall without texture lines in the oracle edge set, so
+    # mostly constant per segment) is off by 0.585 px per view step on average (measured)
     err = np.abs(np.asarray(ours.disparity) - gt)
-    assert np.median(err) < 0.5
+    assert np.mean(err) < 0.65
     # view consistency: a centre pixel followed through the 25 views meets few labels
-    # (measured 1.27; 1.0 = perfectly consistent) and superpixel centres stay put (1.46 px).
+    # (measured 1.29; 1.0 = perfectly consistent) and superpixel centres stay put (1.38 px).
     # The k-means baseline with a slightly noisy GT disparity is still better here (1.21, 0.97 px):
     # see docs/SUPERPIXELS.md, "Known limitations".
     lpp = labels_per_pixel(ours.labels, gt[2, 2], gt)
     assert lpp < 1.3
     assert labels_per_pixel(base.labels, gt[2, 2], gt) < 1.3
-    assert self_similarity_error(ours.labels, gt) < 1.6
+    assert self_similarity_error(ours.labels, gt) < 1.45
 
 
 def test_centre_first_is_more_view_consistent(scene, results):
-    # the thesis order (drop disagreements, propagate on the cross-hair) against the default
-    # centre-first labelling; measured 1.292 against 1.268 labels per pixel
+    # the thesis order (drop disagreements, propagate on the cross-hair) against centre-first
+    # labelling: labels per pixel measured 1.292 -> 1.268 (without the connectivity step);
+    # the default (with it) moves the self-similarity error 1.445 -> 1.379 px
     lf, _, edges, offset = scene
     gt = np.asarray(lf.gt_disparity)
-    thesis = superpixels(
-        lf, SuperpixelConfig(size=12, centre_first=False), edges=edges, surface_offset=offset
-    )
+    kw = dict(edges=edges, surface_offset=offset)
+    thesis = superpixels(lf, SuperpixelConfig(size=12, centre_first=False), **kw)
+    first = superpixels(lf, SuperpixelConfig(size=12, connected=False), **kw)
     lpp_thesis = labels_per_pixel(thesis.labels, gt[2, 2], gt)
-    lpp = labels_per_pixel(results[0].labels, gt[2, 2], gt)
-    assert lpp < lpp_thesis - 0.01
-    assert (np.asarray(thesis.labels) >= 0).all()
+    assert labels_per_pixel(first.labels, gt[2, 2], gt) < lpp_thesis - 0.01
+    sse_thesis = self_similarity_error(thesis.labels, gt)
+    assert self_similarity_error(results[0].labels, gt) < sse_thesis - 0.03
+    assert (np.asarray(thesis.labels) >= 0).all() and (np.asarray(first.labels) >= 0).all()
