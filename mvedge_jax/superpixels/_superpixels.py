@@ -33,9 +33,9 @@ class SuperpixelResult(eqx.Module):
             (pixels per view step).
         n_superpixels: number of k-means clusters (seeds on a regular grid of about
             ``H W / size²`` cells).
-        consistent_fraction: fraction of all light-field pixels whose label came from the
-            agreeing horizontal and vertical segmentations (before propagation; 1 minus the
-            projection holes for the baseline).
+        consistent_fraction: fraction of all light-field pixels on which the projected
+            horizontal and vertical segmentations agree (before the centre-view check and
+            propagation; 1 minus the projection holes for the baseline).
         seconds: wall seconds per stage (after compilation of the jitted stages is included
             on a first call; see ``experiments/superpixels_ch5.py`` for timings).
     """
@@ -302,8 +302,9 @@ def superpixels(
        nearest-labelled-pixel fill for the rest: every pixel of every view gets a label and
        a disparity.
 
-    The EPI pairing and k-means run on the host (SciPy / scikit-learn); rendering, projection
-    and propagation are jitted and vectorised over EPIs and views.
+    The EPI pairing, k-means and the centre view's connected components run on the host
+    (SciPy / scikit-learn); rendering, projection and propagation are jitted and vectorised
+    over EPIs and views.
 
     Args:
         lf: the light field (at least 3x3 views, complete cross-hair).
