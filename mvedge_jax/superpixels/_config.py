@@ -39,7 +39,8 @@ class SuperpixelConfig(eqx.Module):
             along the EPI's spatial axis is at least this (unit vector); otherwise the side is
             unknown and both sides of the line stay open.
         split_width: segments wider than this (pixels, centre view) are split into equal parts
-            by new lines with the segment's disparity (thesis: 15).
+            by new lines with the segment's disparity, interpolated on a slanted segment (see
+            ``slant_tol``) (thesis: 15).
         slant_tol: a bounding line whose disparity is within this of its segment's
             (pixels per view step) lies on the segment's surface: the segment's disparity
             then varies linearly between its two lines (cuts included) and every pixel is

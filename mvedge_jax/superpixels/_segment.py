@@ -142,6 +142,12 @@ def match_lines(
     other EPI direction (`resolve_unknown`). Segments wider than ``config.split_width`` on the
     centre row are split into equal parts by lines ("cuts") of the segment's disparity.
 
+    Slanted surfaces (``config.slant_tol > 0``, not in the thesis): a bounding line of a known
+    segment whose disparity is within ``slant_tol`` of the segment's lies on its surface; the
+    surface's disparity at each line (``surface_left``, ``surface_right``) is then the
+    line's own, else the segment's. Cuts take the disparity interpolated linearly between the
+    two, and each part's disparity (depth order) is the smaller of its two ends.
+
     Args:
         pos: ``(n,)`` centre-row positions, ascending (pixels).
         disp: ``(n,)`` disparities (pixels per view step).

@@ -186,14 +186,17 @@ def _fill_from_cross(labels, disp, row_l, row_d, col_l, col_d):
 
 @jax.jit
 def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
-    """Labels of every view from both segmentations, where they disagree settled by the
-    fully labelled centre view ``(H, W)``, and holes filled from it.
+    """Labels of every view from both segmentations, checked against the fully labelled
+    centre view ``(H, W)``, and holes filled from it.
 
-    A disagreeing pixel of view ``(r, c)`` keeps the horizontal (vertical) segmentation's
-    label if that label is the centre view's at the pixel moved back to the centre by the
-    label's own disparity (both: the nearer); else it is a hole. Holes take the centre labels
+    A projected label of view ``(r, c)`` *matches* when it is the centre view's label at the
+    pixel moved back to the centre by the label's own disparity (nearest pixel, inside the
+    image). A pixel where the two segmentations agree keeps the label if either projection
+    matches (disparity: their mean); otherwise it keeps the label of the matching one (both:
+    the nearer, i.e. the larger disparity); else it is a hole. Holes take the centre labels
     forward-projected (z-buffered) by the centre disparity, where one lands. Returns
-    ``labels``, ``disparity`` ``(U, V, H, W)`` and the bool mask of agreeing pixels.
+    ``labels`` (-1: hole), ``disparity`` ``(U, V, H, W)`` and the bool mask of pixels where
+    the two segmentations agree.
     """
     lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
     U, V, H, W = lh.shape
