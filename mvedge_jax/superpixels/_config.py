@@ -64,6 +64,9 @@ class SuperpixelConfig(eqx.Module):
             centre view does not see goes to the cross-hair propagation. False: the thesis'
             order (drop disagreements, propagate on the cross-hair). Not in the thesis; see
             docs/SUPERPIXELS.md.
+        smooth_radius: with ``centre_first``, the centre labels pass a majority (mode) filter
+            of this chessboard radius (pixels; a pixel keeps its label on ties) before the
+            connectivity step; 0: none (not in the thesis).
         connected: with ``centre_first``, every label keeps only its largest 4-connected
             piece of the centre view; the other pieces are refilled by nearest fill before
             the projection (removes scattered fragments of a cluster; not in the thesis).
@@ -105,6 +108,7 @@ class SuperpixelConfig(eqx.Module):
     keep_disagreeing: bool = eqx.field(static=True, default=False)
     centre_first: bool = eqx.field(static=True, default=True)
     connected: bool = eqx.field(static=True, default=True)
+    smooth_radius: int = eqx.field(static=True, default=0)
     propagation_radius: int = eqx.field(static=True, default=2)
     propagation_passes: int = eqx.field(static=True, default=2)
     w_colour: Array = eqx.field(converter=_f32, default=1.0)
@@ -119,6 +123,10 @@ class SuperpixelConfig(eqx.Module):
         for name in ("line_capacity", "kmeans_iters", "propagation_radius"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"SuperpixelConfig.{name} must be >= 1; got {getattr(self, name)}")
+        if self.smooth_radius < 0:
+            raise ValueError(
+                f"SuperpixelConfig.smooth_radius must be >= 0; got {self.smooth_radius}"
+            )
         if self.propagation_passes < 0:
             raise ValueError(
                 f"SuperpixelConfig.propagation_passes must be >= 0; got {self.propagation_passes}"

@@ -226,6 +226,27 @@ def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
     return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
 
 
+@functools.partial(jax.jit, static_argnames=("radius",))
+def _mode_filter(labels: Int[Array, "H W"], radius: int) -> Int[Array, "H W"]:
+    """Majority label in the ``(2 radius + 1)²`` window of every pixel (edge-padded); a pixel
+    keeps its own label unless another one is strictly more frequent (ties among the others:
+    the first in row-major window order)."""
+    H, W = labels.shape
+    p = jnp.pad(labels, radius, mode="edge")
+    side = 2 * radius + 1
+    win = [p[i // side : i // side + H, i % side : i % side + W] for i in range(side * side)]
+
+    def count(a):
+        return sum((a == b).astype(jnp.int32) for b in win)
+
+    best, best_n = labels, count(labels)
+    for a in win:
+        n = count(a)
+        better = n > best_n
+        best, best_n = jnp.where(better, a, best), jnp.where(better, n, best_n)
+    return best
+
+
 def _fragments(labels: np.ndarray) -> np.ndarray:
     """``(H, W)`` bool: the pixels outside the largest 4-connected piece of their label (SciPy
     connected components of the graph of equal-label neighbours; ties: the first piece)."""
@@ -292,9 +313,10 @@ def superpixels(
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
        shifted horizontally, by their pixels' disparities (z-buffer: nearer wins).
        With ``config.centre_first`` (default, not in the thesis) the centre view is labelled
-       completely first (agreeing pixels, eq 5.1, nearest fill; with ``config.connected``
-       each label then keeps only its largest 4-connected piece, the rest refilled by
-       nearest fill); a projected label is kept
+       completely first (agreeing pixels, eq 5.1, nearest fill; then a majority filter of
+       chessboard radius ``config.smooth_radius``; with ``config.connected`` each label
+       then keeps only its largest 4-connected piece, the rest refilled by nearest fill);
+       a projected label is kept
        in any view only where it equals the centre's label at the pixel moved back to the
        centre by its disparity (a disagreement takes the segmentation that matches, both:
        the nearer), and the remaining pixels take the centre labels forward-projected.
@@ -433,6 +455,8 @@ def superpixels(
             passes=config.propagation_passes,
         )
         c_l, c_d = nearest_fill(c_l, c_d)
+        if config.smooth_radius > 0:
+            c_l = _mode_filter(c_l[0], config.smooth_radius)[None]
         if config.connected:
             frag = _fragments(np.asarray(c_l[0]))
             c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)

@@ -41,6 +41,7 @@ CFG = SuperpixelConfig()
         (dict(weight_d=-1.0), "weight_d"),
         (dict(w_photo=float("nan")), "w_photo"),
         (dict(slant_tol=-0.1), "slant_tol"),
+        (dict(smooth_radius=-1), "smooth_radius"),
         (dict(keep_disagreeing=True), "centre_first"),
     ],
 )
@@ -302,6 +303,21 @@ def test_propagation_matches_pixelwise_reference():
     assert (labels < 0).sum() > (ref_l < 0).sum()  # the reference did fill holes
 
 
+def test_mode_filter_removes_specks_keeps_straight_boundaries():
+    from mvedge_jax.superpixels._superpixels import _mode_filter
+
+    lab = np.zeros((7, 8), np.int32)
+    lab[:, 5:] = 2  # a straight boundary
+    lab[3, 2] = 1  # a one-pixel speck
+    out = np.asarray(_mode_filter(jnp.asarray(lab), 1))
+    expect = np.zeros((7, 8), np.int32)
+    expect[:, 5:] = 2
+    np.testing.assert_array_equal(out, expect)
+    # a three-way tie (3 of 9 each in the middle of three stripes) keeps the own label
+    stripes = np.tile(np.arange(3, dtype=np.int32), (3, 1))
+    np.testing.assert_array_equal(np.asarray(_mode_filter(jnp.asarray(stripes), 1))[1], [0, 1, 2])
+
+
 def test_fragments_outside_the_largest_piece():
     from mvedge_jax.superpixels._superpixels import _fragments
 
@@ -387,3 +403,14 @@ def test_centre_first_is_more_view_consistent(scene, results):
     sse_thesis = self_similarity_error(thesis.labels, gt)
     assert self_similarity_error(results[0].labels, gt) < sse_thesis - 0.03
     assert (np.asarray(thesis.labels) >= 0).all() and (np.asarray(first.labels) >= 0).all()
+
+
+def test_smoothing_makes_superpixels_more_compact(scene, results):
+    # a radius-2 majority filter of the centre labels: compactness measured 0.555 -> 0.581
+    from mvedge_jax.metrics import compactness
+
+    lf, _, edges, offset = scene
+    cfg = SuperpixelConfig(size=12, smooth_radius=2)
+    smooth = superpixels(lf, cfg, edges=edges, surface_offset=offset)
+    assert compactness(smooth.labels) > compactness(results[0].labels) + 0.01
+    assert (np.asarray(smooth.labels) >= 0).all()
