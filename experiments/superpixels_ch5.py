@@ -137,7 +137,10 @@ def main() -> None:
     ap.add_argument("--plot", default=None, help="PNG path of the Fig. 5.4-style plot")
     ap.add_argument("--json", default=None, help="write all numbers to this JSON file")
     ap.add_argument(
-        "--set", nargs="*", default=[], help="SuperpixelConfig overrides, e.g. weight_d=60"
+        "--set",
+        nargs="*",
+        default=[],
+        help="SuperpixelConfig overrides, e.g. weight_d=60 centre_first=False slant_tol=0",
     )
     args = ap.parse_args()
     if not args.paths and not args.synthetic:
@@ -145,7 +148,10 @@ def main() -> None:
     config_kw = {}
     for item in args.set:
         k, v = item.split("=", 1)
-        config_kw[k] = float(v) if "." in v or "e" in v else int(v)
+        if v in ("True", "False"):
+            config_kw[k] = v == "True"
+        else:
+            config_kw[k] = float(v) if "." in v or "e" in v else int(v)
     results = {}
     for name, lf, ids in _scenes(args):
         t0 = time.perf_counter()

@@ -39,7 +39,13 @@ class SuperpixelConfig(eqx.Module):
             along the EPI's spatial axis is at least this (unit vector); otherwise the side is
             unknown and both sides of the line stay open.
         split_width: segments wider than this (pixels, centre view) are split into equal parts
-            by new lines with the segment's disparity (thesis: 15).
+            by new lines with the segment's disparity, interpolated on a slanted segment (see
+            ``slant_tol``) (thesis: 15).
+        slant_tol: a bounding line whose disparity is within this of its segment's
+            (pixels per view step) lies on the segment's surface: the segment's disparity
+            then varies linearly between its two lines (cuts included) and every pixel is
+            projected with its own disparity; 0 gives the thesis' piece-wise constant
+            disparity per segment (not in the thesis; see docs/SUPERPIXELS.md).
         weight_xy: k-means weight of the x and y features (thesis 1).
         weight_d: k-means weight of the disparity normalised to [0, 1] over the scene's range
             (thesis 120).
@@ -47,10 +53,23 @@ class SuperpixelConfig(eqx.Module):
         lab_scale: unit of the colour features: CIELAB is multiplied by this before
             ``weight_lab`` (1: L* in [0, 100]).
         kmeans_iters: Lloyd iterations of the clustering (scikit-learn ``max_iter``).
-        keep_disagreeing: where the horizontal and vertical segmentations disagree, keep the
-            nearer one's label (ties: the horizontal) instead of unlabelling the pixel (thesis:
-            unlabel, then propagate; keeping is more view-consistent, because each
-            segmentation alone is consistent across views).
+        keep_disagreeing: with ``centre_first=False``, where the horizontal and vertical
+            segmentations disagree, keep the nearer one's label (ties: the horizontal)
+            instead of unlabelling the pixel (thesis: unlabel, then propagate).
+        centre_first: label the centre view completely first (its agreeing pixels, eq 5.1,
+            nearest fill), then keep a projected label in any view only where it is the
+            centre's label at the pixel moved back to the centre by its own disparity
+            (disagreements settled by whichever segmentation matches; both: the nearer),
+            and fill the holes with the centre labels forward-projected; only what the
+            centre view does not see goes to the cross-hair propagation. False: the thesis'
+            order (drop disagreements, propagate on the cross-hair). Not in the thesis; see
+            docs/SUPERPIXELS.md.
+        smooth_radius: with ``centre_first``, the centre labels pass a majority (mode) filter
+            of this chessboard radius (pixels; a pixel keeps its label on ties) before the
+            connectivity step; 0: none (not in the thesis).
+        connected: with ``centre_first``, every label keeps only its largest 4-connected
+            piece of the centre view; the other pieces are refilled by nearest fill before
+            the projection (removes scattered fragments of a cluster; not in the thesis).
         propagation_radius: label propagation (eq 5.1) looks for labelled pixels within this
             chessboard radius (pixels).
         propagation_passes: passes of the propagation; each fills unlabelled pixels within
@@ -80,12 +99,16 @@ class SuperpixelConfig(eqx.Module):
     occlusion_tol: float = eqx.field(static=True, default=0.1)
     side_min: float = eqx.field(static=True, default=0.3)
     split_width: float = eqx.field(static=True, default=15.0)
+    slant_tol: float = eqx.field(static=True, default=0.3)
     weight_xy: float = eqx.field(static=True, default=1.0)
     weight_d: float = eqx.field(static=True, default=120.0)
     weight_lab: float = eqx.field(static=True, default=3.0)
     lab_scale: float = eqx.field(static=True, default=0.2)
     kmeans_iters: int = eqx.field(static=True, default=20)
     keep_disagreeing: bool = eqx.field(static=True, default=False)
+    centre_first: bool = eqx.field(static=True, default=True)
+    connected: bool = eqx.field(static=True, default=True)
+    smooth_radius: int = eqx.field(static=True, default=0)
     propagation_radius: int = eqx.field(static=True, default=2)
     propagation_passes: int = eqx.field(static=True, default=2)
     w_colour: Array = eqx.field(converter=_f32, default=1.0)
@@ -100,6 +123,10 @@ class SuperpixelConfig(eqx.Module):
         for name in ("line_capacity", "kmeans_iters", "propagation_radius"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"SuperpixelConfig.{name} must be >= 1; got {getattr(self, name)}")
+        if self.smooth_radius < 0:
+            raise ValueError(
+                f"SuperpixelConfig.smooth_radius must be >= 0; got {self.smooth_radius}"
+            )
         if self.propagation_passes < 0:
             raise ValueError(
                 f"SuperpixelConfig.propagation_passes must be >= 0; got {self.propagation_passes}"
@@ -110,6 +137,11 @@ class SuperpixelConfig(eqx.Module):
             )
         if not 0.0 <= self.omega_d <= 1.0:
             raise ValueError(f"SuperpixelConfig.omega_d must be in [0, 1]; got {self.omega_d}")
+        if self.keep_disagreeing and self.centre_first:
+            raise ValueError(
+                "SuperpixelConfig.keep_disagreeing needs centre_first=False (the centre view "
+                "settles disagreements otherwise)"
+            )
         if not self.split_width >= 2:
             raise ValueError(f"SuperpixelConfig.split_width must be >= 2; got {self.split_width}")
         for name in (
@@ -117,6 +149,7 @@ class SuperpixelConfig(eqx.Module):
             "merge_disparity",
             "occlusion_tol",
             "side_min",
+            "slant_tol",
             "weight_xy",
             "weight_d",
             "weight_lab",

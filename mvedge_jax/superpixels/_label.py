@@ -46,13 +46,46 @@ def forward_labels(
     return lab, d
 
 
-def _propagate_view(
-    lab_img, labels, disp, offset, cmp_lab, cmp_off, w_colour, w_spatial, w_photo, radius
+def _capacity(n: int) -> int:
+    """A static capacity >= ``n`` from a coarse ladder (powers of two and 1.5 times them, at
+    least 256) so that changing hole counts compile few variants."""
+    c = 256
+    while c < n:
+        c = c * 3 // 2 if c & (c - 1) == 0 else c * 4 // 3
+    return c
+
+
+@functools.partial(jax.jit, static_argnames=("radius", "capacity"))
+def _propagate_pass(
+    lab_views,
+    labels,
+    disp,
+    offsets,
+    cmp_lab,
+    cmp_off,
+    w_colour,
+    w_spatial,
+    w_photo,
+    *,
+    radius: int,
+    capacity: int,
 ):
-    """One pass of eq 5.1 on one view: every unlabelled pixel takes the cheapest labelled
-    candidate within the chessboard ``radius``."""
-    H, W = labels.shape
-    y, x = jnp.meshgrid(jnp.arange(H), jnp.arange(W), indexing="ij")
+    """One pass of eq 5.1 over the unlabelled pixels (at most ``capacity``, gathered into a
+    list): each takes the cheapest labelled candidate within the chessboard ``radius``, all
+    against the labels at the start of the pass."""
+    N, H, W = labels.shape
+    M = cmp_lab.shape[0]
+    flat_l = labels.reshape(-1)
+    flat_d = disp.reshape(-1)
+    flat_lab = lab_views.reshape(-1, 3)
+    cmp_flat = cmp_lab.reshape(M, H * W, 3)
+    (idx,) = jnp.nonzero(flat_l < 0, size=capacity, fill_value=N * H * W)
+    ok = idx < N * H * W
+    idx = jnp.minimum(idx, N * H * W - 1)
+    n, rem = idx // (H * W), idx % (H * W)
+    y, x = rem // W, rem % W
+    me = flat_lab[idx]  # (C, 3)
+    off = offsets[n]  # (C, 2)
     side = 2 * radius + 1
 
     def body(k, carry):
@@ -62,19 +95,20 @@ def _propagate_view(
         cy, cx = y + sy, x + sx
         inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
         cy, cx = jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)
-        cl = jnp.where(inside, labels[cy, cx], -1)
-        cd = disp[cy, cx]
-        cost = w_colour * jnp.sum((lab_img - lab_img[cy, cx]) ** 2, -1)
+        c_idx = n * (H * W) + cy * W + cx
+        cl = jnp.where(inside, flat_l[c_idx], -1)
+        cd = flat_d[c_idx]
+        cost = w_colour * jnp.sum((me - flat_lab[c_idx]) ** 2, -1)
         cost = cost + w_spatial * (sy * sy + sx * sx).astype(cost.dtype)
 
         def photo(m, acc):
-            ddr = offset[0] - cmp_off[m, 0]
-            ddc = offset[1] - cmp_off[m, 1]
+            ddr = off[:, 0] - cmp_off[m, 0]
+            ddc = off[:, 1] - cmp_off[m, 1]
             py = jnp.clip(jnp.rint(y + ddr * cd).astype(jnp.int32), 0, H - 1)
             px = jnp.clip(jnp.rint(x + ddc * cd).astype(jnp.int32), 0, W - 1)
-            return acc + jnp.sum(jnp.abs(lab_img - cmp_lab[m][py, px]), -1)
+            return acc + jnp.sum(jnp.abs(me - cmp_flat[m][py * W + px]), -1)
 
-        pc = jax.lax.fori_loop(0, cmp_lab.shape[0], photo, jnp.zeros_like(cost))
+        pc = jax.lax.fori_loop(0, M, photo, jnp.zeros_like(cost))
         cost = cost + w_photo * pc
         better = (cl >= 0) & (cost < best_c)
         return (
@@ -83,13 +117,19 @@ def _propagate_view(
             jnp.where(better, cd, best_d),
         )
 
-    init = (jnp.full((H, W), jnp.inf, lab_img.dtype), jnp.full((H, W), -1, jnp.int32), disp)
+    init = (
+        jnp.full((capacity,), jnp.inf, lab_views.dtype),
+        jnp.full((capacity,), -1, jnp.int32),
+        jnp.zeros((capacity,), disp.dtype),
+    )
     _, bl, bd = jax.lax.fori_loop(0, side * side, body, init)
-    free = labels < 0
-    return jnp.where(free, bl, labels), jnp.where(free & (bl >= 0), bd, disp)
+    hit = ok & (bl >= 0)
+    tgt = jnp.where(hit, idx, N * H * W)  # out of range: dropped
+    flat_l = flat_l.at[tgt].set(bl, mode="drop")
+    flat_d = flat_d.at[tgt].set(bd, mode="drop")
+    return flat_l.reshape(N, H, W), flat_d.reshape(N, H, W)
 
 
-@functools.partial(jax.jit, static_argnames=("radius", "passes"))
 def propagate_labels(
     lab_views: Float[Array, "N H W 3"],
     labels: Int[Array, "N H W"],
@@ -111,8 +151,14 @@ def propagate_labels(
     ``ω_c |I(x, y) - I(p, q)|² + ω_s ((x - p)² + (y - q)²)
     + ω_d Σ_m |I(x, y) - I_m(x + Δc_m d, y + Δr_m d)|₁`` with ``I`` in CIELAB and the sum over
     the ``M`` comparison views (``Δ``: view offset minus the comparison view's offset; nearest
-    pixel). The pixel takes the cheapest candidate's label and disparity. ``passes`` passes
-    reach pixels up to ``passes · radius`` from a label.
+    pixel). The pixel takes the cheapest candidate's label and disparity (the first in
+    row-major candidate order on ties). Every pass labels against the labels at its start;
+    ``passes`` passes reach pixels up to ``passes · radius`` from a label.
+
+    Each pass gathers the unlabelled pixels into a list (its length is read on the host and
+    rounded up to a coarse ladder of static capacities) and runs a jitted ``lax.fori_loop``
+    over the ``(2 radius + 1)²`` candidates, so the cost is proportional to the number of
+    holes, not of pixels. Passes stop early when no hole is left.
 
     Args:
         lab_views: ``(N, H, W, 3)`` CIELAB of the views to label.
@@ -122,8 +168,8 @@ def propagate_labels(
         compare_lab: ``(M, H, W, 3)`` CIELAB of the comparison views.
         compare_offsets: ``(M, 2)`` their offsets.
         w_colour, w_spatial, w_photo: ω_c, ω_s, ω_d of eq 5.1.
-        radius: search radius in pixels (static).
-        passes: number of passes (static).
+        radius: search radius in pixels.
+        passes: number of passes.
 
     Returns:
         ``(labels, disparity)``, shapes as the inputs.
@@ -131,11 +177,35 @@ def propagate_labels(
     References:
         Thesis Sec. 5.1.1 ("Label Propagation", eq 5.1).
     """
-    one = lambda li, lb, d, o: _propagate_view(  # noqa: E731
-        li, lb, d, o, compare_lab, compare_offsets, w_colour, w_spatial, w_photo, radius
+    labels = jnp.asarray(labels, jnp.int32)
+    disparity = jnp.asarray(disparity, jnp.float32)
+    args = (
+        jnp.asarray(lab_views, jnp.float32),
+        jnp.asarray(offsets, jnp.float32),
+        jnp.asarray(compare_lab, jnp.float32),
+        jnp.asarray(compare_offsets, jnp.float32),
+        jnp.asarray(w_colour, jnp.float32),
+        jnp.asarray(w_spatial, jnp.float32),
+        jnp.asarray(w_photo, jnp.float32),
     )
+    lv, off, cl, co, wc, ws, wp = args
     for _ in range(passes):
-        labels, disparity = jax.vmap(one)(lab_views, labels, disparity, offsets)
+        holes = int(jnp.sum(labels < 0))
+        if holes == 0:
+            break
+        labels, disparity = _propagate_pass(
+            lv,
+            labels,
+            disparity,
+            off,
+            cl,
+            co,
+            wc,
+            ws,
+            wp,
+            radius=int(radius),
+            capacity=_capacity(holes),
+        )
     return labels, disparity
 
 

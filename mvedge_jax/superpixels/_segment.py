@@ -50,6 +50,10 @@ class EPISegments(eqx.Module):
             disparity is the segment's).
         valid: ``(E, S)`` bool.
         n_dropped: ``()`` int32, lines and segments lost to the capacities.
+        surface_left, surface_right: ``(E, S)`` float32 or ``None``, the disparity of the
+            segment's surface at its left and right line; a pixel's disparity is interpolated
+            linearly between them across the segment (a slanted surface). ``None``: both are
+            ``disparity`` (piece-wise constant).
     """
 
     left_pos: Float[Array, "E S"]
@@ -62,20 +66,28 @@ class EPISegments(eqx.Module):
     right_cut: Array
     valid: Array
     n_dropped: Int[Array, ""]
+    surface_left: Float[Array, "E S"] | None = None
+    surface_right: Float[Array, "E S"] | None = None
 
     def with_disparity(self, disparity: Float[Array, "E S"], known: Array) -> EPISegments:
-        """The same segments with new disparities (cut lines follow their segment's)."""
+        """The same segments with new disparities: a segment whose disparity changes becomes
+        fronto-parallel at it (its surface ends and cut lines take it)."""
+        changed = disparity != self.disparity
+        sl = self.disparity if self.surface_left is None else self.surface_left
+        sr = self.disparity if self.surface_right is None else self.surface_right
         return EPISegments(
             left_pos=self.left_pos,
-            left_disp=jnp.where(self.left_cut, disparity, self.left_disp),
+            left_disp=jnp.where(self.left_cut & changed, disparity, self.left_disp),
             right_pos=self.right_pos,
-            right_disp=jnp.where(self.right_cut, disparity, self.right_disp),
+            right_disp=jnp.where(self.right_cut & changed, disparity, self.right_disp),
             disparity=disparity,
             known=known,
             left_cut=self.left_cut,
             right_cut=self.right_cut,
             valid=self.valid,
             n_dropped=self.n_dropped,
+            surface_left=jnp.where(changed, disparity, sl),
+            surface_right=jnp.where(changed, disparity, sr),
         )
 
 
@@ -130,6 +142,12 @@ def match_lines(
     other EPI direction (`resolve_unknown`). Segments wider than ``config.split_width`` on the
     centre row are split into equal parts by lines ("cuts") of the segment's disparity.
 
+    Slanted surfaces (``config.slant_tol > 0``, not in the thesis): a bounding line of a known
+    segment whose disparity is within ``slant_tol`` of the segment's lies on its surface; the
+    surface's disparity at each line (``surface_left``, ``surface_right``) is then the
+    line's own, else the segment's. Cuts take the disparity interpolated linearly between the
+    two, and each part's disparity (depth order) is the smaller of its two ends.
+
     Args:
         pos: ``(n,)`` centre-row positions, ascending (pixels).
         disp: ``(n,)`` disparities (pixels per view step).
@@ -140,8 +158,8 @@ def match_lines(
         fallback_disparity: disparity of a segment bounded only by image borders.
 
     Returns:
-        ``(m, 8)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity,
-        known, left_is_cut, right_is_cut)``.
+        ``(m, 10)`` float64 rows ``(left_pos, left_disp, right_pos, right_disp, disparity,
+        known, left_is_cut, right_is_cut, surface_left, surface_right)``.
 
     References:
         Thesis Sec. 4.2.1, Alg. 2, eq 4.7, Fig. 4.4.
@@ -194,16 +212,27 @@ def match_lines(
         else:  # the surface lies behind both lines: its depth is resolved later
             lines = [D[k] for k in (i, j) if not border[k]]
             d, known = (min(lines) if lines else fallback_disparity), 0.0
+        # The surface's disparity at each bounding line: the line's own where it lies within
+        # slant_tol of the segment's (the line is on the surface), else the segment's.
+        ends = [d, d]
+        if known and config.slant_tol > 0:
+            ends = [
+                D[k] if not border[k] and abs(D[k] - d) <= config.slant_tol else d for k in (i, j)
+            ]
         w = P[j] - P[i]
         parts = max(1, math.ceil(w / config.split_width))
-        cuts = [(P[i], D[i], 0.0)]
-        cuts += [(P[i] + w * q / parts, d, 1.0) for q in range(1, parts)]
-        cuts += [(P[j], D[j], 0.0)]
+        step = (ends[1] - ends[0]) / parts
+        cuts = [(P[i], D[i], 0.0, ends[0])]
+        cuts += [
+            (P[i] + w * q / parts, ends[0] + q * step, 1.0, ends[0] + q * step)
+            for q in range(1, parts)
+        ]
+        cuts += [(P[j], D[j], 0.0, ends[1])]
         rows += [
-            (a[0], a[1], b[0], b[1], d, known, a[2], b[2])
+            (a[0], a[1], b[0], b[1], min(a[3], b[3]), known, a[2], b[2], a[3], b[3])
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
-    return np.asarray(rows, np.float64).reshape(-1, 8)
+    return np.asarray(rows, np.float64).reshape(-1, 10)
 
 
 def _epi_lines(
@@ -302,7 +331,7 @@ def segment_epis(
     all_d = np.concatenate([dd for _, dd, _ in lines]) if lines else np.zeros(0)
     fallback = float(np.median(all_d)) if all_d.size else 0.0
     S = config.segments_per_epi(width)
-    table = np.zeros((n_epis, S, 8), np.float32)
+    table = np.zeros((n_epis, S, 10), np.float32)
     valid = np.zeros((n_epis, S), bool)
     for e, (p, d, s) in enumerate(lines):
         rows = match_lines(p, d, s, n_views, width, config, fallback)
@@ -329,38 +358,76 @@ def segment_epis(
         right_cut=t[..., 7] > 0.5,
         valid=jnp.asarray(valid),
         n_dropped=jnp.asarray(dropped, jnp.int32),
+        surface_left=t[..., 8],
+        surface_right=t[..., 9],
     )
 
 
-def _render_one(lp, ld, rp, rd, disp, known, valid, n_views: int, width: int):
+def _spans(lp, ld, rp, rd, n_views: int, width: int):
+    """First and one-past-last integer pixel ``(.., V, S)`` of every segment in every EPI row:
+    ``left(t) <= x < right(t)`` is ``ceil(left) <= x < ceil(right)``, clipped to the EPI."""
     t = (jnp.arange(n_views) - n_views // 2).astype(jnp.float32)[:, None]
-    left = lp[None, :] - t * ld[None, :]  # (V, S)
-    right = rp[None, :] - t * rd[None, :]
-    x = jnp.arange(width, dtype=jnp.float32)[None, :, None]
-    cov = (left[:, None, :] <= x) & (x < right[:, None, :]) & valid[None, None, :]
+    left = lp[..., None, :] - t * ld[..., None, :]
+    right = rp[..., None, :] - t * rd[..., None, :]
+    x0 = jnp.clip(jnp.ceil(left), 0, width).astype(jnp.int32)
+    x1 = jnp.clip(jnp.ceil(right), 0, width).astype(jnp.int32)
+    return x0, x1
+
+
+def _render_one(lp, ld, rp, rd, disp, known, valid, sl, sr, n_views: int, width: int, span: int):
+    x0, x1 = _spans(lp, ld, rp, rd, n_views, width)  # (V, S)
+    V, S = x0.shape
+    xs = x0[..., None] + jnp.arange(span, dtype=jnp.int32)  # (V, S, K)
+    cov = (xs < x1[..., None]) & valid[None, :, None]
+    row = jnp.arange(V, dtype=jnp.int32)[:, None, None]
+    tgt = jnp.where(cov, row * width + xs, V * width).ravel()  # V * width: dropped
     order = jnp.where(known, disp, disp - 1e4)  # unresolved segments lie behind the rest
-    score = jnp.where(cov, order[None, None, :], -jnp.inf)
-    idx = jnp.argmax(score, axis=-1).astype(jnp.int32)
-    hit = cov.any(-1)
-    return jnp.where(hit, idx, -1), jnp.where(hit, disp[idx], 0.0)
+    o = jnp.broadcast_to(order[None, :, None], cov.shape).ravel()
+    z = jnp.full((V * width + 1,), -jnp.inf, order.dtype).at[tgt].max(o)
+    win = cov.ravel() & (o >= z[tgt])
+    sid = jnp.broadcast_to(jnp.arange(S, dtype=jnp.int32)[None, :, None], cov.shape).ravel()
+    idx = jnp.full((V * width + 1,), S, jnp.int32).at[jnp.where(win, tgt, V * width)].min(sid)
+    idx = idx[: V * width].reshape(V, width)
+    hit = idx < S
+    idx = jnp.where(hit, idx, 0)
+    # the pixel's disparity: linear between the surface ends across the segment's row span
+    t = (jnp.arange(V) - V // 2).astype(jnp.float32)[:, None]
+    left = jnp.take_along_axis(lp[None, :] - t * ld[None, :], idx, axis=1)
+    right = jnp.take_along_axis(rp[None, :] - t * rd[None, :], idx, axis=1)
+    x = jnp.arange(width, dtype=jnp.float32)[None, :]
+    f = jnp.clip((x - left) / jnp.maximum(right - left, 1e-6), 0.0, 1.0)
+    d = sl[idx] + f * (sr[idx] - sl[idx])
+    return jnp.where(hit, idx, -1), jnp.where(hit, d, 0.0)
 
 
-@functools.partial(jax.jit, static_argnames=("n_views", "width", "batch_size"))
+@functools.partial(jax.jit, static_argnames=("n_views", "width", "span", "batch_size"))
+def _render(args, n_views: int, width: int, span: int, batch_size: int):
+    fn = lambda a: _render_one(*a, n_views=n_views, width=width, span=span)  # noqa: E731
+    return jax.lax.map(fn, args, batch_size=batch_size)
+
+
 def render_segments(
-    segments: EPISegments, n_views: int, width: int, batch_size: int = 32
+    segments: EPISegments, n_views: int, width: int, batch_size: int = 64
 ) -> tuple[Int[Array, "E V W"], Float[Array, "E V W"]]:
     """Label every EPI pixel with the nearest segment covering it.
 
     Pixel ``x`` of the row at view offset ``t`` is covered by a segment when
     ``left(t) <= x < right(t)`` with ``left(t) = left_pos - t left_disp`` (likewise right);
-    among covering segments the largest disparity wins (the nearest surface occludes);
-    segments whose disparity is not ``known`` lie behind all known ones.
+    among covering segments the largest disparity wins (the nearest surface occludes; ties:
+    the lowest segment index); segments whose disparity is not ``known`` lie behind all known
+    ones.
+
+    Every segment paints its pixel span of every row into a z-buffer (two scatters, max of
+    the depth order then min of the index among the winners), jitted and mapped over EPIs in
+    batches. The widest span (read on the host, rounded up to a coarse ladder) is a static
+    size, so the cost is ``O(E V S span)`` rather than ``O(E V S width)``.
 
     Args:
         segments: `EPISegments` ``(E, S)``.
         n_views: EPI height (views).
         width: EPI width (pixels).
-        batch_size: EPIs per vectorised batch (bounds memory: ``batch · V · W · S`` booleans).
+        batch_size: EPIs per vectorised batch (bounds memory: ``batch · V · S · span``
+            indices).
 
     Returns:
         ``(labels (E, V, W) int32`` segment index in ``[0, S)`` or -1 where uncovered,
@@ -369,7 +436,6 @@ def render_segments(
     References:
         Thesis Sec. 4.2.1 (regions bounded by two lines with explicit depth order).
     """
-    fn = lambda a: _render_one(*a, n_views=n_views, width=width)  # noqa: E731
     args = (
         segments.left_pos,
         segments.left_disp,
@@ -378,8 +444,15 @@ def render_segments(
         segments.disparity,
         segments.known,
         segments.valid,
+        segments.disparity if segments.surface_left is None else segments.surface_left,
+        segments.disparity if segments.surface_right is None else segments.surface_right,
     )
-    return jax.lax.map(fn, args, batch_size=batch_size)
+    x0, x1 = _spans(*args[:4], n_views, width)
+    widest = int(jnp.max(jnp.where(segments.valid[:, None, :], x1 - x0, 0), initial=0))
+    span = 8
+    while span < widest:
+        span = span * 3 // 2 if span & (span - 1) == 0 else span * 4 // 3
+    return _render(args, n_views=n_views, width=width, span=span, batch_size=batch_size)
 
 
 def resolve_unknown(

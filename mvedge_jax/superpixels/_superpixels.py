@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
@@ -31,9 +33,9 @@ class SuperpixelResult(eqx.Module):
             (pixels per view step).
         n_superpixels: number of k-means clusters (seeds on a regular grid of about
             ``H W / size²`` cells).
-        consistent_fraction: fraction of all light-field pixels whose label came from the
-            agreeing horizontal and vertical segmentations (before propagation; 1 minus the
-            projection holes for the baseline).
+        consistent_fraction: fraction of all light-field pixels on which the projected
+            horizontal and vertical segmentations agree (before the centre-view check and
+            propagation; 1 minus the projection holes for the baseline).
         seconds: wall seconds per stage (after compilation of the jitted stages is included
             on a first call; see ``experiments/superpixels_ch5.py`` for timings).
     """
@@ -55,6 +57,16 @@ def _check_lf(lf: LightField) -> None:
         np.asarray(lf.view_mask)[U // 2].all() and np.asarray(lf.view_mask)[:, V // 2].all()
     ):
         raise ValueError("superpixels need the complete central row and column of views")
+
+
+def _trim(seg: EPISegments, multiple: int = 16) -> EPISegments:
+    """The same segments with the capacity cut to the largest per-EPI count (rounded up to a
+    ``multiple``, which bounds recompilation): the valid segments of an EPI come first, so
+    segment indices are unchanged and rendering costs ``O(S)`` less."""
+    S = seg.valid.shape[1]
+    n = int(np.asarray(seg.valid).sum(1).max(initial=0))
+    keep = min(S, max(multiple, -(-n // multiple) * multiple))
+    return jax.tree_util.tree_map(lambda a: a[:, :keep] if a.ndim == 2 else a, seg)
 
 
 @jax.jit
@@ -147,8 +159,9 @@ def _project_both(row_l, row_d, col_l, col_d):
 
 @functools.partial(jax.jit, static_argnames=("keep",))
 def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
-    """Labels of every view from both segmentations, kept where they agree (with ``keep``,
-    a disagreeing pixel keeps the nearer segmentation's label, the horizontal on ties)."""
+    """Labels ``(U, V, H, W)`` of every view from both segmentations, kept where they agree
+    (with ``keep``, a disagreeing pixel keeps the nearer segmentation's label, the horizontal
+    on ties); their disparities; and the bool mask of agreeing pixels."""
     lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
     agree = (lh >= 0) & (lh == lv)
     lab = jnp.where(agree, lh, -1)
@@ -157,7 +170,7 @@ def _project_agree(row_l, row_d, col_l, col_d, keep: bool = False):
         use_v = (lv >= 0) & ((lh < 0) | (dv > dh))
         lab = jnp.where(agree, lab, jnp.where(use_v, lv, lh))
         d = jnp.where(agree, d, jnp.where(use_v, dv, dh))
-    return lab, d
+    return lab, d, agree
 
 
 @jax.jit
@@ -171,6 +184,91 @@ def _fill_from_cross(labels, disp, row_l, row_d, col_l, col_d):
     return jnp.where(take_v, lv, labels), jnp.where(take_v, dv, disp)
 
 
+@jax.jit
+def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
+    """Labels of every view from both segmentations, checked against the fully labelled
+    centre view ``(H, W)``, and holes filled from it.
+
+    A projected label of view ``(r, c)`` *matches* when it is the centre view's label at the
+    pixel moved back to the centre by the label's own disparity (nearest pixel, inside the
+    image). A pixel where the two segmentations agree keeps the label if either projection
+    matches (disparity: their mean); otherwise it keeps the label of the matching one (both:
+    the nearer, i.e. the larger disparity); else it is a hole. Holes take the centre labels
+    forward-projected (z-buffered) by the centre disparity, where one lands. Returns
+    ``labels`` (-1: hole), ``disparity`` ``(U, V, H, W)`` and the bool mask of pixels where
+    the two segmentations agree.
+    """
+    lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
+    U, V, H, W = lh.shape
+    agree = (lh >= 0) & (lh == lv)
+    dr = (jnp.arange(U) - U // 2).astype(jnp.float32)[:, None, None, None]
+    dc = (jnp.arange(V) - V // 2).astype(jnp.float32)[None, :, None, None]
+    y = jnp.arange(H, dtype=jnp.float32)[:, None]
+    x = jnp.arange(W, dtype=jnp.float32)[None, :]
+
+    def matches(lab, d):
+        cy = jnp.rint(y + dr * d).astype(jnp.int32)
+        cx = jnp.rint(x + dc * d).astype(jnp.int32)
+        inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
+        back = centre_l[jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)]
+        return (lab >= 0) & inside & (back == lab)
+
+    mh, mv = matches(lh, dh), matches(lv, dv)
+    use_v = mv & (~mh | (dv > dh))
+    keep = agree & (mh | mv)
+    lab = jnp.where(keep, lh, jnp.where(use_v, lv, jnp.where(mh, lh, -1)))
+    d = jnp.where(keep, 0.5 * (dh + dv), jnp.where(use_v, dv, jnp.where(mh, dh, 0.0)))
+    rs, cs = jnp.meshgrid(jnp.arange(U) - U // 2, jnp.arange(V) - V // 2, indexing="ij")
+    off = jnp.stack([rs.ravel(), cs.ravel()], -1).astype(jnp.float32)
+    pl, pd = jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(off)
+    pl, pd = pl.reshape(lab.shape), pd.reshape(lab.shape)
+    take = (lab < 0) & (pl >= 0)
+    return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
+
+
+@functools.partial(jax.jit, static_argnames=("radius",))
+def _mode_filter(labels: Int[Array, "H W"], radius: int) -> Int[Array, "H W"]:
+    """Majority label in the ``(2 radius + 1)²`` window of every pixel (edge-padded); a pixel
+    keeps its own label unless another one is strictly more frequent (ties among the others:
+    the first in row-major window order)."""
+    H, W = labels.shape
+    p = jnp.pad(labels, radius, mode="edge")
+    side = 2 * radius + 1
+    win = [p[i // side : i // side + H, i % side : i % side + W] for i in range(side * side)]
+
+    def count(a):
+        return sum((a == b).astype(jnp.int32) for b in win)
+
+    best, best_n = labels, count(labels)
+    for a in win:
+        n = count(a)
+        better = n > best_n
+        best, best_n = jnp.where(better, a, best), jnp.where(better, n, best_n)
+    return best
+
+
+def _fragments(labels: np.ndarray) -> np.ndarray:
+    """``(H, W)`` bool: the pixels outside the largest 4-connected piece of their label (SciPy
+    connected components of the graph of equal-label neighbours; ties: the first piece)."""
+    H, W = labels.shape
+    idx = np.arange(H * W).reshape(H, W)
+    right = labels[:, :-1] == labels[:, 1:]
+    down = labels[:-1] == labels[1:]
+    a = np.concatenate([idx[:, :-1][right], idx[:-1][down]])
+    b = np.concatenate([idx[:, 1:][right], idx[1:][down]])
+    graph = coo_matrix((np.ones(a.size, np.int8), (a, b)), shape=(H * W, H * W))
+    n, piece = connected_components(graph, directed=False)
+    size = np.bincount(piece, minlength=n)
+    piece_label = np.zeros(n, np.int64)
+    piece_label[piece] = labels.ravel()
+    order = np.lexsort((-size, piece_label))  # by label, the largest piece first
+    first = np.ones(n, bool)
+    first[1:] = piece_label[order][1:] != piece_label[order][:-1]
+    keep = np.zeros(n, bool)
+    keep[order[first]] = True
+    return ~keep[piece].reshape(H, W)
+
+
 def _cross_offsets(U: int, V: int) -> np.ndarray:
     rc, cc = U // 2, V // 2
     row = [(0.0, float(c - cc)) for c in range(V)]
@@ -178,11 +276,13 @@ def _cross_offsets(U: int, V: int) -> np.ndarray:
     return np.asarray(row + col, np.float32)
 
 
-def _ends(lab_views: Array, U: int, V: int) -> tuple[Array, Array]:
-    """CIELAB and offsets of the four end views of the cross-hair (eq 5.1's comparison)."""
+def _ends(lab_row: Array, lab_col: Array) -> tuple[Array, Array]:
+    """CIELAB ``(4, H, W, 3)`` and offsets ``(4, 2)`` of the four end views of the cross-hair
+    (eq 5.1's comparison) from the centre row ``(V, H, W, 3)`` and column ``(U, H, W, 3)``."""
+    V, U = lab_row.shape[0], lab_col.shape[0]
     rc, cc = U // 2, V // 2
+    lab = jnp.stack([lab_row[0], lab_row[V - 1], lab_col[0], lab_col[U - 1]])
     idx = [(rc, 0), (rc, V - 1), (0, cc), (U - 1, cc)]
-    lab = jnp.stack([lab_views[r, c] for r, c in idx])
     off = jnp.asarray([(r - rc, c - cc) for r, c in idx], jnp.float32)
     return lab, off
 
@@ -200,7 +300,9 @@ def superpixels(
        row of views) and vertical EPI (centre column) are paired into depth-ordered segments
        (`segment_epis`, Alg. 2) and rendered into EPI label maps (`render_segments`); a segment
        whose bounding lines both face away from it (a surface seen between two nearer ones)
-       takes the other direction's disparity on the centre view (`resolve_unknown`).
+       takes the other direction's disparity on the centre view (`resolve_unknown`). With
+       ``config.slant_tol > 0`` a segment's disparity varies linearly between bounding lines
+       that lie on its surface, so every EPI pixel has its own disparity.
     2. Clustering (Sec. 5.1.1): every segment with at least one visible pixel becomes a point
        ``(x, y, d, L*, a*, b*)`` (x, y: its centre on the centre view; d: its disparity,
        normalised to [0, 1] over the scene's range; colour: the mean CIELAB of its EPI
@@ -209,15 +311,25 @@ def superpixels(
        features of the segment nearest to it in the image).
     3. Every view ``(r, c)`` receives the cluster labels of the horizontal segmentation of view
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
-       shifted horizontally, by the segments' disparities (z-buffer: nearer wins); pixels where
-       the two disagree (or that neither reaches) are unlabelled (with
-       ``config.keep_disagreeing`` a disagreeing pixel keeps the nearer one's label instead).
-    4. Label propagation (eq 5.1) on the cross-hair views, projection of those labels into the
-       other views' unlabelled pixels, and nearest-labelled-pixel fill for the rest: every
-       pixel of every view gets a label and a disparity.
+       shifted horizontally, by their pixels' disparities (z-buffer: nearer wins).
+       With ``config.centre_first`` (default, not in the thesis) the centre view is labelled
+       completely first (agreeing pixels, eq 5.1, nearest fill; then a majority filter of
+       chessboard radius ``config.smooth_radius``; with ``config.connected`` each label
+       then keeps only its largest 4-connected piece, the rest refilled by nearest fill);
+       a projected label is kept
+       in any view only where it equals the centre's label at the pixel moved back to the
+       centre by its disparity (a disagreement takes the segmentation that matches, both:
+       the nearer), and the remaining pixels take the centre labels forward-projected.
+       Otherwise (the thesis) pixels where the two disagree are unlabelled (with
+       ``config.keep_disagreeing`` they keep the nearer one's label instead).
+    4. Label propagation (eq 5.1) on the cross-hair views for what is still unlabelled,
+       projection of those labels into the other views' unlabelled pixels, and
+       nearest-labelled-pixel fill for the rest: every pixel of every view gets a label and
+       a disparity.
 
-    The EPI pairing and k-means run on the host (SciPy / scikit-learn); rendering, projection
-    and propagation are jitted and vectorised over EPIs and views.
+    The EPI pairing, k-means and the centre view's connected components run on the host
+    (SciPy / scikit-learn); rendering, projection and propagation are jitted and vectorised
+    over EPIs and views.
 
     Args:
         lf: the light field (at least 3x3 views, complete cross-hair).
@@ -256,6 +368,7 @@ def superpixels(
         t0 = time.perf_counter()
     seg_h = segment_epis(edges, surface_offset, HORIZONTAL, V, H, W, config)
     seg_v = segment_epis(edges, surface_offset, VERTICAL, U, W, H, config)
+    seg_h, seg_v = _trim(seg_h), _trim(seg_v)
     seconds["pairing"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)  # (H, V, W)
@@ -278,9 +391,10 @@ def superpixels(
     )
     lab_h, disp_h = render_segments(seg_h, n_views=V, width=W)
     lab_v, disp_v = render_segments(seg_v, n_views=U, width=H)
-    lab_views = rgb_to_lab(lf.views)
-    epi_h = jnp.transpose(lab_views[rc], (1, 0, 2, 3))  # (H, V, W, 3)
-    epi_v = jnp.transpose(lab_views[:, cc], (2, 0, 1, 3))  # (W, U, H, 3)
+    lab_row = rgb_to_lab(lf.views[rc])  # (V, H, W, 3): only the cross-hair is needed
+    lab_col = rgb_to_lab(lf.views[:, cc])  # (U, H, W, 3)
+    epi_h = jnp.transpose(lab_row, (1, 0, 2, 3))  # (H, V, W, 3)
+    epi_v = jnp.transpose(lab_col, (2, 0, 1, 3))  # (W, U, H, 3)
     col_h, cnt_h = _segment_colours(epi_h, lab_h, seg_h.disparity)
     col_v, cnt_v = _segment_colours(epi_v, lab_v, seg_v.disparity)
     jax.block_until_ready((col_h, col_v))
@@ -320,13 +434,42 @@ def superpixels(
     row_d = jnp.transpose(disp_h, (1, 0, 2))
     col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
     col_d = jnp.transpose(disp_v, (1, 2, 0))
-    consistent = float(jnp.mean(_project_agree(row_l, row_d, col_l, col_d)[0] >= 0))
-    labels, disp = _project_agree(row_l, row_d, col_l, col_d, keep=config.keep_disagreeing)
+    cmp_lab, cmp_off = _ends(lab_row, lab_col)
+    if config.centre_first:
+        # The centre view first: its agreeing labels, eq 5.1, nearest fill; then every view's
+        # disagreements and holes are settled against it.
+        c_ok = (row_l[cc] >= 0) & (row_l[cc] == col_l[rc])
+        c_l = jnp.where(c_ok, row_l[cc], -1)[None]
+        c_d = jnp.where(c_ok, 0.5 * (row_d[cc] + col_d[rc]), 0.0)[None]
+        c_l, c_d = propagate_labels(
+            lab_row[cc][None],
+            c_l,
+            c_d,
+            jnp.zeros((1, 2), jnp.float32),
+            cmp_lab,
+            cmp_off,
+            config.w_colour,
+            config.w_spatial,
+            config.w_photo,
+            radius=config.propagation_radius,
+            passes=config.propagation_passes,
+        )
+        c_l, c_d = nearest_fill(c_l, c_d)
+        if config.smooth_radius > 0:
+            c_l = _mode_filter(c_l[0], config.smooth_radius)[None]
+        if config.connected:
+            frag = _fragments(np.asarray(c_l[0]))
+            c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)
+        labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
+    else:
+        labels, disp, agree = _project_agree(
+            row_l, row_d, col_l, col_d, keep=config.keep_disagreeing
+        )
+    consistent = float(jnp.mean(agree))
     # Propagation on the cross-hair (eq 5.1), then into the other views, then nearest fill.
     cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
     cross_d = jnp.concatenate([disp[rc], disp[:, cc]])
-    cross_lab = jnp.concatenate([lab_views[rc], lab_views[:, cc]])
-    cmp_lab, cmp_off = _ends(lab_views, U, V)
+    cross_lab = jnp.concatenate([lab_row, lab_col])
     cross_l, cross_d = propagate_labels(
         cross_lab,
         cross_l,
