@@ -69,21 +69,32 @@ STAGES_MAX_BYTES = 1 << 30
 _FORMAT = 1
 
 
-@functools.cache
 def _source_digest() -> str:
-    """SHA-256 of every Python file of the installed `mvedge_jax` package (path and bytes);
-    empty when they cannot be read (e.g. a zipped install): nothing is stored then."""
+    """SHA-256 of every Python file of the installed `mvedge_jax` package (path and bytes),
+    recomputed whenever a file's size or modification time changes (an edited and reloaded
+    module gets new keys); empty when the files cannot be read (e.g. a zipped install):
+    nothing is stored then."""
     root = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    files = sorted(root.rglob("*.py"))
     try:
-        for path in files:
+        files = sorted(root.rglob("*.py"))
+        stats = tuple((str(f), st.st_mtime_ns, st.st_size) for f in files for st in [f.stat()])
+    except OSError:
+        return ""
+    return _hash_files(root, stats) if files else ""
+
+
+@functools.lru_cache(maxsize=4)
+def _hash_files(root: Path, stats: tuple) -> str:
+    h = hashlib.sha256()
+    try:
+        for name, _, _ in stats:
+            path = Path(name)
             h.update(path.relative_to(root).as_posix().encode())
             h.update(b"\0")
             h.update(path.read_bytes())
     except OSError:
         return ""
-    return h.hexdigest() if files else ""
+    return h.hexdigest()
 
 
 @functools.cache

@@ -73,6 +73,18 @@ def test_the_key_covers_shapes_static_arguments_source_and_settings(tmp_path, rg
         jax.config.update("jax_enable_x64", False)
 
 
+def test_the_source_digest_follows_edits(tmp_path, monkeypatch):
+    package = tmp_path / "mvedge_jax"
+    package.mkdir()
+    module = package / "m.py"
+    module.write_text("x = 1\n")
+    monkeypatch.setattr(_cache, "__file__", str(package / "_cache.py"))
+    first = _cache._source_digest()
+    assert first == _cache._source_digest()
+    module.write_text("x = 22\n")
+    assert _cache._source_digest() not in ("", first)
+
+
 def test_a_damaged_file_is_a_miss_and_is_replaced(tmp_path, rgb):
     StageCache(store=_cache.StageStore(tmp_path)).compile(rgb_to_lab, rgb)
     (file,) = tmp_path.glob("*.bin")
