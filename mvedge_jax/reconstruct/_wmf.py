@@ -33,7 +33,7 @@ def _block_median(
     d_pad: Array,
     g_pad: Array,
     inside_pad: Array,
-    slope_pad: Array | None,
+    slope_pad: Array | None,  # (2, rows, cols) padded x and y slopes, or None
     row0: Array,
     sigma: Array,
     *,
@@ -54,7 +54,8 @@ def _block_median(
     g = lax.dynamic_slice(g_pad, (row0, 0, 0), (rows, width + 2 * r, C))
     m = lax.dynamic_slice(inside_pad, (row0, 0), (rows, width + 2 * r))
     if slope_pad is not None:
-        s = lax.dynamic_slice(slope_pad, (row0, 0, 0), (rows, width + 2 * r, 2))
+        sx = lax.dynamic_slice(slope_pad[0], (row0, 0), (rows, width + 2 * r))
+        sy = lax.dynamic_slice(slope_pad[1], (row0, 0), (rows, width + 2 * r))
 
     oy, ox = jnp.meshgrid(jnp.arange(k), jnp.arange(k), indexing="ij")
     oy, ox = oy.reshape(-1), ox.reshape(-1)
@@ -64,8 +65,9 @@ def _block_median(
         ds = lax.dynamic_slice(d, (a, b), (block, width))
         if slope_pad is not None:
             # The sample's own surface extrapolated to the window centre: p - q = (r - a, r - b).
-            ss = lax.dynamic_slice(s, (a, b, 0), (block, width, 2))
-            ds = ds + (r - b).astype(ds.dtype) * ss[..., 0] + (r - a).astype(ds.dtype) * ss[..., 1]
+            sxs = lax.dynamic_slice(sx, (a, b), (block, width))
+            sys_ = lax.dynamic_slice(sy, (a, b), (block, width))
+            ds = ds + (r - b).astype(ds.dtype) * sxs + (r - a).astype(ds.dtype) * sys_
         ms = lax.dynamic_slice(m, (a, b), (block, width))
         gs = lax.dynamic_slice(g, (a, b, 0), (block, width, C))
         if weight_type in ("cos", "jac"):
@@ -124,7 +126,8 @@ def _wmf(
     d_pad = jnp.pad(disparity, pad_rows)
     g_pad = jnp.pad(guide, pad_rows + ((0, 0),))
     inside = jnp.pad(mask.astype(disparity.dtype), pad_rows)
-    s_pad = None if slope is None else jnp.pad(slope, pad_rows + ((0, 0),))
+    # Two planes (x, y slopes), each sliced like the disparity.
+    s_pad = None if slope is None else jnp.pad(jnp.moveaxis(slope, -1, 0), ((0, 0),) + pad_rows)
     fn = functools.partial(
         _block_median,
         d_pad,
