@@ -197,21 +197,43 @@ def sensitivity(cache: Path | None) -> dict:
     return scores
 
 
+def _static_numeric_paths(config=None, prefix: str = "") -> dict[str, str]:
+    """Dotted paths of the static ``int``/``float`` fields of `ReconstructConfig` (relative to
+    it) and their kinds; a grid over them recompiles the sharpening once per value."""
+    import dataclasses
+
+    from mvedge_jax._fields import field_spec
+
+    config = ReconstructConfig() if config is None else config
+    out = {}
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        spec = field_spec(f)
+        if isinstance(value, eqx.Module):
+            out.update(_static_numeric_paths(value, f"{prefix}{f.name}."))
+        elif spec is not None and spec.kind in ("int", "float"):
+            out[f"{prefix}{f.name}"] = spec.kind
+    return out
+
+
 def parse_grid(text: str) -> dict[str, tuple[float, ...]]:
     """``"name=v1,v2;name2=v3,v4"`` → ``{name: (v1, v2), name2: (v3, v4)}`` (array fields of
-    `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``)."""
+    `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``, or its static numeric
+    fields, e.g. ``sharpen.wmf_slope_baseline``: those recompile per value)."""
     prefix = "reconstruct."
     fields = {p.removeprefix(prefix) for p in hyperparameter_paths() if p.startswith(prefix)}
+    statics = _static_numeric_paths()
     grid = {}
     for part in text.split(";"):
         name, _, values = part.partition("=")
         name = name.strip()
-        if name not in fields or not values:
+        if (name not in fields and name not in statics) or not values:
             raise ValueError(
                 f"bad grid entry {part!r}: use NAME=V1,V2 with a ReconstructConfig array field "
-                "(a dotted path such as sharpen.wmf_sigma)"
+                "(a dotted path such as sharpen.wmf_sigma) or static numeric field"
             )
-        grid[name] = tuple(float(v) for v in values.split(","))
+        cast = int if statics.get(name) == "int" else float
+        grid[name] = tuple(cast(float(v)) for v in values.split(","))
     return grid
 
 

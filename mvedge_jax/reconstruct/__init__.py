@@ -25,5 +25,6 @@ from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
 from ._reconstruct import select_centre as select_centre
 from ._reconstruct import sharpen as sharpen
+from ._wmf import disparity_slopes as disparity_slopes
 from ._wmf import weighted_mean_filter as weighted_mean_filter
 from ._wmf import weighted_median_filter as weighted_median_filter

@@ -88,6 +88,18 @@ class SharpenConfig(eqx.Module):
         wmf_radius: weighted-median window radius (thesis 7).
         wmf_weight: weighted-median weight type (see `weighted_median_filter`).
         wmf_iterations: bisection steps of the weighted median.
+        wmf_slope_baseline: first-order (slanted-surface) filtering: each window sample ``q``
+            enters the filter as ``d_q + ∇d_q · (p − q)``, its own surface extrapolated to the
+            centre pixel ``p``, with ``∇d`` the `disparity_slopes` of the filter's input
+            (minmod of differences over this many pixels, so no slope spans a
+            discontinuity). A window on one slanted plane then votes for the
+            plane's value at ``p`` whatever the colour weights, where the plain median returns
+            the value of whichever sample the weights favour (up to ``wmf_radius`` pixels
+            of slope away). 0 = the plain filter of the samples (the thesis).
+        wmf_slope_max: largest slope magnitude used by that extrapolation (pixels per view
+            step per pixel); steeper estimates are clipped (the blur across a discontinuity
+            is not a surface). The sharpened map stays differentiable in the disparities
+            (through the extrapolated samples); these two fields are static options.
         refine: snap the centre disparity near depth discontinuities to the photo-consistent
             side (occlusion-aware multi-view colour test, `photo_refine`) before the weighted
             median.
@@ -122,6 +134,8 @@ class SharpenConfig(eqx.Module):
     wmf_radius: int = static(7, lower=1, upper=64)
     wmf_weight: str = static("exp", choices=WEIGHT_TYPES)
     wmf_iterations: int = static(10, lower=1, upper=64)
+    wmf_slope_baseline: int = static(12, lower=0, upper=64)
+    wmf_slope_max: float = static(0.05, lower=0.0)
     refine: bool = static(True)
     refine_radius: int = static(3, lower=1, upper=64)
     refine_iterations: int = static(12, lower=0, upper=1000)

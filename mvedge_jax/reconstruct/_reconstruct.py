@@ -26,7 +26,7 @@ from ._crosshair import (
 )
 from ._matte import boundary_matte
 from ._photo import photo_refine, photo_select
-from ._wmf import weighted_mean_filter, weighted_median_filter
+from ._wmf import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..surface import SurfaceResult
@@ -251,6 +251,9 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
         sharp = _matte(sharp, colour_guide(views[rc, cc], config.colour_space), config)
+    slope = None
+    if sc.enabled and sc.wmf_slope_baseline > 0:
+        slope = disparity_slopes(sharp, baseline=sc.wmf_slope_baseline, max_slope=sc.wmf_slope_max)
     if sc.enabled and sc.filter == "mean":
         sharp = weighted_mean_filter(
             sharp,
@@ -258,6 +261,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             radius=sc.wmf_radius,
             sigma=sc.wmf_sigma,
             weight_type=sc.wmf_weight,
+            slope=slope,
         )
     elif sc.enabled:
         sharp = weighted_median_filter(
@@ -267,6 +271,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             sigma=sc.wmf_sigma,
             weight_type=sc.wmf_weight,
             iterations=sc.wmf_iterations,
+            slope=slope,
         )
     return sharp
 
@@ -285,7 +290,10 @@ def sharpen(
     With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
     its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
     ``config.sharpen.enabled``: `weighted_median_filter` guided by the centre view (thesis
-    Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result).
+    Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result); with
+    ``config.sharpen.wmf_slope_baseline > 0`` its samples enter extrapolated to the window
+    centre along their own `disparity_slopes` (first-order filtering, not in the thesis: the
+    plain median flattens slanted surfaces).
     All off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
 
     Args:
@@ -536,7 +544,8 @@ def reconstruct(
        side with the cross-hair views (`photo_refine`, ``config.sharpen.refine``; not in the
        thesis: it removes the foreground halos that labels on the wrong side of an occlusion
        edge leave), `boundary_matte` (``config.sharpen.matte``), then
-       `weighted_median_filter` guided by the centre view (``config.sharpen.enabled``).
+       `weighted_median_filter` guided by the centre view (``config.sharpen.enabled``;
+       first-order along `disparity_slopes` with ``config.sharpen.wmf_slope_baseline > 0``).
     3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).
     4. Angular inpainting of every horizontal EPI ``(V, W)`` of the centre row of views and
        every vertical EPI ``(U, H)`` of the centre column (eqs 6.4–6.8): data weight

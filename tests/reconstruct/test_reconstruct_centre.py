@@ -183,6 +183,8 @@ def test_centre_bad_input(small_scene):
         (SharpenConfig, dict(wmf_weight="x")),
         (FillConfig, dict(hole_fill="none")),
         (SharpenConfig, dict(wmf_radius=0)),
+        (SharpenConfig, dict(wmf_slope_baseline=-1)),
+        (SharpenConfig, dict(wmf_slope_max=-0.01)),
         (EpiConfig, dict(c=float("nan"))),
         (FillConfig, dict(min_confidence=-0.1)),
         (EpiConfig, dict(min_confidence=-0.1)),

@@ -1,4 +1,5 @@
-"""Weighted median filter: exact definition, OpenCV, sharpening of a depth step, jit, errors."""
+"""Weighted median filter: exact definition, OpenCV, sharpening of a depth step, first-order
+(slope-extrapolated) samples, jit, errors."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from mvedge_jax.io import read_pfm
-from mvedge_jax.reconstruct import weighted_median_filter
+from mvedge_jax.reconstruct import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 
 def _brute(src, guide, r, sigma, weight_type="exp"):
@@ -94,6 +95,65 @@ def test_wmf_sharpens_depth_step_aligned_with_colour_edge():
     err_out = np.abs(out - truth)[:, 14:26]
     assert err_in.max() > 0.5
     assert err_out.max() < 0.05, err_out.max()
+
+
+def _slanted_step(H=24, W=40):
+    """Two textured slanted planes meeting at a colour edge between columns 19 and 20."""
+    rng = np.random.default_rng(3)
+    ys, xs = np.mgrid[:H, :W].astype(np.float32)
+    left = 1.0 + 0.04 * xs - 0.03 * ys
+    right = -0.5 - 0.02 * xs + 0.045 * ys
+    truth = np.where(xs < 20, left, right).astype(np.float32)
+    base = np.where(xs[..., None] < 20, [0.8, 0.2, 0.2], [0.2, 0.3, 0.8])
+    guide = (base + rng.uniform(-0.15, 0.15, (H, W, 3))).astype(np.float32)
+    return truth, guide
+
+
+def test_disparity_slopes_never_cross_a_step():
+    truth, _ = _slanted_step()
+    s = np.asarray(disparity_slopes(truth, baseline=2, max_slope=0.1))
+    assert s.shape == truth.shape + (2,)
+    # two or more pixels from the step (baseline 2): each side's own plane
+    np.testing.assert_allclose(s[2:-2, 2:18, 0], 0.04, atol=1e-5)
+    np.testing.assert_allclose(s[2:-2, 22:-2, 0], -0.02, atol=1e-5)
+    np.testing.assert_allclose(s[2:-2, 2:18, 1], -0.03, atol=1e-5)
+    np.testing.assert_allclose(s[2:-2, 22:-2, 1], 0.045, atol=1e-5)
+    # next to the step (columns 18, 19 | 20, 21) the difference across it (1.5 px/view step)
+    # is never taken: the own side's slope where it agrees in sign, else 0
+    near = s[2:-2, 18:22, 0]
+    assert np.all(np.isclose(near, 0.0) | np.isclose(near, 0.04) | np.isclose(near, -0.02))
+    assert (
+        float(np.max(np.abs(disparity_slopes(truth, baseline=2, max_slope=0.035)))) <= 0.035 + 1e-7
+    )
+    with pytest.raises(ValueError, match="baseline"):
+        disparity_slopes(truth, baseline=0)
+    with pytest.raises(ValueError, match="disparity"):
+        disparity_slopes(truth[None])
+
+
+def test_first_order_wmf_keeps_slanted_planes():
+    """On textured slanted planes the colour weights are not symmetric about the centre pixel,
+    so the plain median returns another sample's value (up to r · slope away); with the
+    samples extrapolated along their own slopes every sample of a plane votes for its value
+    at the centre and the median returns the planes exactly. The mean also averages the few
+    samples whose slope is 0 next to the step or the border: closer, not exact."""
+    truth, guide = _slanted_step()
+    slope = disparity_slopes(truth, baseline=3, max_slope=0.05)
+    plain = np.asarray(weighted_median_filter(truth, guide, radius=7, sigma=0.05))
+    first = np.asarray(weighted_median_filter(truth, guide, radius=7, sigma=0.05, slope=slope))
+    mean = np.asarray(weighted_mean_filter(truth, guide, radius=7, sigma=0.05, slope=slope))
+    inner = (slice(7, -7), slice(7, -7))
+    assert np.abs(plain - truth)[inner].max() > 0.1
+    np.testing.assert_allclose(first[inner], truth[inner], atol=1e-4)
+    plain_mean = np.asarray(weighted_mean_filter(truth, guide, radius=7, sigma=0.05))
+    assert np.abs(mean - truth)[inner].mean() < 0.5 * np.abs(plain_mean - truth)[inner].mean()
+    # zero slopes are the plain filter
+    zero = np.zeros(truth.shape + (2,), np.float32)
+    np.testing.assert_allclose(
+        weighted_median_filter(truth, guide, radius=7, sigma=0.05, slope=zero), plain
+    )
+    with pytest.raises(ValueError, match="slope"):
+        weighted_median_filter(truth, guide, radius=7, slope=zero[..., :1])
 
 
 def test_wmf_jit_and_mask():
