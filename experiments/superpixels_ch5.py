@@ -113,7 +113,8 @@ def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
 
 def print_table(title: str, rows: dict) -> None:
     sizes = sorted(rows)
-    keys = [k for k in METRICS if k in rows[sizes[0]]["ours"]]
+    first = next(iter(rows[sizes[0]].values()))
+    keys = [k for k in METRICS if k in first]
     print(f"\n## {title}")
     print("| size | method | " + " | ".join(keys) + " |")
     print("|---" * (len(keys) + 2) + "|")
@@ -141,7 +142,7 @@ def plot(rows: dict, path: str, title: str) -> None:
     import matplotlib.pyplot as plt
 
     sizes = sorted(rows)
-    keys = [k for k in METRICS if k in rows[sizes[0]]["ours"]]
+    keys = [k for k in METRICS if k in next(iter(rows[sizes[0]].values()))]
     fig, axes = plt.subplots(1, len(keys), figsize=(3.6 * len(keys), 3.2), squeeze=False)
     for ax, k in zip(axes[0], keys, strict=True):
         for m, style in zip(METHODS, ("o-", "d-", "s--", "^:"), strict=True):
