@@ -29,6 +29,7 @@ METRICS = (
     "boundary_recall",
     "undersegmentation_error",
     "compactness",
+    "depth_edge_recall",
 )
 METHODS = ("ours", "ours_dense", "kmeans_ours_disparity", "kmeans_gt_disparity")
 
@@ -73,6 +74,27 @@ def _estimate(lf, cache: str | None):
     return out
 
 
+def depth_edge_recall(centre_labels, centre_gt, jump: float = 0.3, distance: int = 2) -> float:
+    """Centre view: fraction of depth-edge pixels (a 4-neighbour whose ground-truth disparity
+    differs by more than ``jump`` px per view step, both sides) with a superpixel boundary
+    pixel within chessboard ``distance``."""
+    from scipy.ndimage import maximum_filter
+
+    def edge_map(a, diff):
+        e = np.zeros(a.shape, bool)
+        h, v = diff(a[:, 1:], a[:, :-1]), diff(a[1:], a[:-1])
+        e[:, 1:] |= h
+        e[:, :-1] |= h
+        e[1:] |= v
+        e[:-1] |= v
+        return e
+
+    depth = edge_map(np.asarray(centre_gt, np.float64), lambda a, b: np.abs(a - b) > jump)
+    sp = edge_map(np.asarray(centre_labels), lambda a, b: a != b)
+    near = maximum_filter(sp, size=2 * distance + 1)
+    return float(near[depth].mean()) if depth.any() else float("nan")
+
+
 def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
 
     from mvedge_jax.metrics import superpixel_metrics
@@ -98,6 +120,7 @@ def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
                 superpixel_metrics(res.labels, **gt_kw),
                 seconds=time.perf_counter() - t0,
                 consistent_fraction=res.consistent_fraction,
+                depth_edge_recall=depth_edge_recall(res.labels[U // 2, V // 2], gt_c),
             )
         for name, d in (("kmeans_ours_disparity", ours_d), ("kmeans_gt_disparity", gt_c)):
             if name not in methods:
@@ -105,7 +128,9 @@ def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
             t0 = time.perf_counter()
             b = kmeans_superpixels(lf, d, cfg)
             out[name] = dict(
-                superpixel_metrics(b.labels, **gt_kw), seconds=time.perf_counter() - t0
+                superpixel_metrics(b.labels, **gt_kw),
+                seconds=time.perf_counter() - t0,
+                depth_edge_recall=depth_edge_recall(b.labels[U // 2, V // 2], gt_c),
             )
         rows[size] = out
     return rows
