@@ -980,9 +980,9 @@ def superpixels_command(path: str, views, scale, transpose, size, out, force, de
     and labels.npz's disparity is that reconstruction.
     """
     from .edges import detect_edges
-    from .pipeline import estimate_disparity
     from .io import OutputWriter, check_output_dir
     from .metrics import superpixel_metrics
+    from .pipeline import estimate_disparity
     from .superpixels import (
         SuperpixelConfig,
         draw_boundaries,
@@ -1006,7 +1006,9 @@ def superpixels_command(path: str, views, scale, transpose, size, out, force, de
     try:
         dense_d = None
         if dense:
-            click.echo("estimating the Ch. 6 disparity (edges, surface vectors, reconstruction) ...")
+            click.echo(
+                "estimating the Ch. 6 disparity (edges, surface vectors, reconstruction) ..."
+            )
             est = estimate_disparity(lf)
             edges, offset, dense_d = est.edges, est.surface.offset, est.disparity
         else:

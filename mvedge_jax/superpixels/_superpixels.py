@@ -29,13 +29,15 @@ class SuperpixelResult(eqx.Module):
     Attributes:
         labels: ``(U, V, H, W)`` int32 superpixel label of every pixel of every view (the
             same label means the same superpixel in every view).
-        disparity: ``(U, V, H, W)`` float32 piece-wise constant disparity of every pixel
-            (pixels per view step).
+        disparity: ``(U, V, H, W)`` float32 disparity of every pixel (pixels per view step):
+            the EPI segments' piece-wise disparity, or the dense ``disparity`` passed to
+            `superpixels`, or the baseline's projected centre map.
         n_superpixels: number of k-means clusters (seeds on a regular grid of about
             ``H W / size²`` cells).
         consistent_fraction: fraction of all light-field pixels on which the projected
             horizontal and vertical segmentations agree (before the centre-view check and
-            propagation; 1 minus the projection holes for the baseline).
+            propagation; with a dense ``disparity`` and for the baseline: 1 minus the
+            projection holes).
         seconds: wall seconds per stage (after compilation of the jitted stages is included
             on a first call; see ``experiments/superpixels_ch5.py`` for timings).
     """
@@ -353,6 +355,8 @@ def superpixels(
        in any view only where it equals the centre's label at the pixel moved back to the
        centre by its disparity (a disagreement takes the segmentation that matches, both:
        the nearer), and the remaining pixels take the centre labels forward-projected.
+       With a dense ``disparity`` the centre labels are instead projected with it (see
+       ``disparity`` below).
        Otherwise (the thesis) pixels where the two disagree are unlabelled (with
        ``config.keep_disagreeing`` they keep the nearer one's label instead).
     4. Label propagation (eq 5.1) on the cross-hair views for what is still unlabelled,
