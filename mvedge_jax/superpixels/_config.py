@@ -66,10 +66,17 @@ class SuperpixelConfig(eqx.Module):
             docs/SUPERPIXELS.md.
         smooth_radius: with ``centre_first``, the centre labels pass a majority (mode) filter
             of this chessboard radius (pixels; a pixel keeps its label on ties) before the
-            connectivity step; 0: none (not in the thesis).
+            connectivity step; 0: none (not in the thesis). Default 2: with a dense
+            ``disparity`` it lowered labels per pixel and raised compactness on all four
+            measured scenes (docs/RESULTS.md, "Superpixels"); without one it trades labels per
+            pixel (slightly higher at sizes 15–20) for compactness and self-similarity.
         connected: with ``centre_first``, every label keeps only its largest 4-connected
             piece of the centre view; the other pieces are refilled by nearest fill before
             the projection (removes scattered fragments of a cluster; not in the thesis).
+        dense_tol: with a dense per-view ``disparity`` passed to `superpixels`, a pixel the
+            forward projection of the centre labels misses takes the centre label at the pixel
+            its own disparity points to when the centre disparity there is within this many
+            pixels per view step of its own (not in the thesis).
         propagation_radius: label propagation (eq 5.1) looks for labelled pixels within this
             chessboard radius (pixels).
         propagation_passes: passes of the propagation; each fills unlabelled pixels within
@@ -108,7 +115,8 @@ class SuperpixelConfig(eqx.Module):
     keep_disagreeing: bool = eqx.field(static=True, default=False)
     centre_first: bool = eqx.field(static=True, default=True)
     connected: bool = eqx.field(static=True, default=True)
-    smooth_radius: int = eqx.field(static=True, default=0)
+    smooth_radius: int = eqx.field(static=True, default=2)
+    dense_tol: float = eqx.field(static=True, default=0.5)
     propagation_radius: int = eqx.field(static=True, default=2)
     propagation_passes: int = eqx.field(static=True, default=2)
     w_colour: Array = eqx.field(converter=_f32, default=1.0)
@@ -154,6 +162,7 @@ class SuperpixelConfig(eqx.Module):
             "weight_d",
             "weight_lab",
             "lab_scale",
+            "dense_tol",
         ):
             v = float(getattr(self, name))
             if not (math.isfinite(v) and v >= 0):

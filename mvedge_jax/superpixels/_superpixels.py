@@ -29,13 +29,15 @@ class SuperpixelResult(eqx.Module):
     Attributes:
         labels: ``(U, V, H, W)`` int32 superpixel label of every pixel of every view (the
             same label means the same superpixel in every view).
-        disparity: ``(U, V, H, W)`` float32 piece-wise constant disparity of every pixel
-            (pixels per view step).
+        disparity: ``(U, V, H, W)`` float32 disparity of every pixel (pixels per view step):
+            the EPI segments' piece-wise disparity, or the dense ``disparity`` passed to
+            `superpixels`, or the baseline's projected centre map.
         n_superpixels: number of k-means clusters (seeds on a regular grid of about
             ``H W / size²`` cells).
         consistent_fraction: fraction of all light-field pixels on which the projected
             horizontal and vertical segmentations agree (before the centre-view check and
-            propagation; 1 minus the projection holes for the baseline).
+            propagation; with a dense ``disparity`` and for the baseline: 1 minus the
+            projection holes).
         seconds: wall seconds per stage (after compilation of the jitted stages is included
             on a first call; see ``experiments/superpixels_ch5.py`` for timings).
     """
@@ -226,6 +228,38 @@ def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
     return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
 
 
+@jax.jit
+def _project_dense(centre_l, disparity, tol):
+    """Centre labels ``(H, W)`` into every view with a dense per-view disparity
+    ``(U, V, H, W)`` (pixels per view step; not in the thesis).
+
+    First the centre labels forward-projected with the centre view's disparity, z-buffered
+    (nearer wins), as the k-means baseline does. A pixel no projection reaches (a crack of the
+    rounding, or a disocclusion) then looks back into the centre view with its own view's
+    disparity ``d``: it takes the centre label there when the centre disparity at that pixel is
+    within ``tol`` of ``d`` (the same surface, visible in the centre view); else it stays a
+    hole (-1). Returns ``labels (U, V, H, W)`` int32 and the bool mask of labelled pixels.
+    """
+    U, V, H, W = disparity.shape
+    centre_d = disparity[U // 2, V // 2]
+    rs, cs = jnp.meshgrid(jnp.arange(U) - U // 2, jnp.arange(V) - V // 2, indexing="ij")
+    off = jnp.stack([rs.ravel(), cs.ravel()], -1).astype(jnp.float32)
+    pl, _ = jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(off)
+    pl = pl.reshape(U, V, H, W)
+    dr = off[:, 0].reshape(U, V, 1, 1)
+    dc = off[:, 1].reshape(U, V, 1, 1)
+    y = jnp.arange(H, dtype=jnp.float32)[:, None]
+    x = jnp.arange(W, dtype=jnp.float32)[None, :]
+    cy = jnp.rint(y + dr * disparity).astype(jnp.int32)
+    cx = jnp.rint(x + dc * disparity).astype(jnp.int32)
+    inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
+    cy, cx = jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)
+    seen = inside & (jnp.abs(centre_d[cy, cx] - disparity) <= tol)
+    back = jnp.where(seen, centre_l[cy, cx], -1)
+    labels = jnp.where(pl >= 0, pl, back)
+    return labels, labels >= 0
+
+
 @functools.partial(jax.jit, static_argnames=("radius",))
 def _mode_filter(labels: Int[Array, "H W"], radius: int) -> Int[Array, "H W"]:
     """Majority label in the ``(2 radius + 1)²`` window of every pixel (edge-padded); a pixel
@@ -293,6 +327,7 @@ def superpixels(
     *,
     edges: EdgeSet | None = None,
     surface_offset: Float[ArrayLike, "N 2"] | None = None,
+    disparity: Float[ArrayLike, "U V H W"] | None = None,
 ) -> SuperpixelResult:
     """View-consistent superpixels of every view of a light field (thesis Ch. 5).
 
@@ -320,6 +355,8 @@ def superpixels(
        in any view only where it equals the centre's label at the pixel moved back to the
        centre by its disparity (a disagreement takes the segmentation that matches, both:
        the nearer), and the remaining pixels take the centre labels forward-projected.
+       With a dense ``disparity`` the centre labels are instead projected with it (see
+       ``disparity`` below).
        Otherwise (the thesis) pixels where the two disagree are unlabelled (with
        ``config.keep_disagreeing`` they keep the nearer one's label instead).
     4. Label propagation (eq 5.1) on the cross-hair views for what is still unlabelled,
@@ -338,13 +375,24 @@ def superpixels(
             ``config.edges`` when omitted.
         surface_offset: ``(N, 2)`` surface vectors of ``edges`` (`surface_vectors` ``.offset``);
             computed with ``config.surface`` when omitted.
+        disparity: optional ``(U, V, H, W)`` float dense disparity of every view, pixels per
+            view step (the Ch. 6 reconstruction, `estimate_disparity` ``.disparity``, built
+            from the same edges). Given and with ``config.centre_first``, step 3 changes (not
+            in the thesis): the completed centre labels are projected into every view with
+            it instead of the EPI segments' piece-wise disparity (`_project_dense`: the
+            centre labels forward-projected with the centre map, z-buffered, as the k-means
+            baseline; unreached pixels look back into the centre view with their own view's
+            disparity and take its label where the centre disparity there is within
+            ``config.dense_tol``); the remaining holes are filled as in step 4, and the
+            returned ``disparity`` is this input. Ignored with ``centre_first=False``.
 
     Returns:
         A `SuperpixelResult` with ``labels`` and ``disparity`` of shape ``(U, V, H, W)``.
 
     Raises:
         ValueError: fewer than 3x3 views, an incomplete cross-hair, NaN/Inf pixels,
-            ``surface_offset`` of the wrong shape, or no EPI segment at all.
+            ``surface_offset`` of the wrong shape, ``disparity`` not ``(U, V, H, W)`` or not
+            finite, or no EPI segment at all.
 
     References:
         Thesis Sec. 4.2.1 (Alg. 2, eq 4.7), Sec. 5.1 (clustering, eq 5.1); Khan et al.,
@@ -354,6 +402,12 @@ def superpixels(
     U, V = lf.grid
     H, W = lf.size
     rc, cc = U // 2, V // 2
+    if disparity is not None:
+        disparity = jnp.asarray(disparity, jnp.float32)
+        if disparity.shape != (U, V, H, W):
+            raise ValueError(f"disparity must have shape {(U, V, H, W)}; got {disparity.shape}")
+        if not bool(jnp.isfinite(disparity).all()):
+            raise ValueError("disparity contains NaN or Inf")
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     if edges is None:
@@ -460,7 +514,13 @@ def superpixels(
         if config.connected:
             frag = _fragments(np.asarray(c_l[0]))
             c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)
-        labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
+        if disparity is None:
+            labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
+        else:
+            labels, agree = _project_dense(c_l[0], disparity, config.dense_tol)
+            disp = disparity
+            # The cross-hair segmentations then only serve the hole propagation below.
+            row_d, col_d = disparity[rc], disparity[:, cc]
     else:
         labels, disp, agree = _project_agree(
             row_l, row_d, col_l, col_d, keep=config.keep_disagreeing
@@ -489,7 +549,10 @@ def superpixels(
     labels = labels.at[rc].set(cross_l[:V]).at[:, cc].set(cross_l[V:])
     disp = disp.at[rc].set(cross_d[:V]).at[:, cc].set(cross_d[V:])
     fl, fd = nearest_fill(labels.reshape(U * V, H, W), disp.reshape(U * V, H, W))
-    fl, fd = jax.block_until_ready((fl.reshape(U, V, H, W), fd.reshape(U, V, H, W)))
+    fl, fd = fl.reshape(U, V, H, W), fd.reshape(U, V, H, W)
+    if disparity is not None and config.centre_first:
+        fd = disparity
+    fl, fd = jax.block_until_ready((fl, fd))
     seconds["label"] = time.perf_counter() - t0
     return SuperpixelResult(
         labels=fl,
