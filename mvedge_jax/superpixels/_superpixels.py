@@ -321,6 +321,24 @@ def _ends(lab_row: Array, lab_col: Array) -> tuple[Array, Array]:
     return lab, off
 
 
+def _propagate(config, lab, labels, disp, offsets, cmp_lab, cmp_off, *, w_photo=None):
+    """`propagate_labels` (eq 5.1) with the weights, radius and passes of ``config``
+    (``w_photo`` overrides ω_d)."""
+    return propagate_labels(
+        lab,
+        labels,
+        disp,
+        offsets,
+        cmp_lab,
+        cmp_off,
+        config.w_colour,
+        config.w_spatial,
+        config.w_photo if w_photo is None else w_photo,
+        radius=config.propagation_radius,
+        passes=config.propagation_passes,
+    )
+
+
 def superpixels(
     lf: LightField,
     config: SuperpixelConfig = SuperpixelConfig(),
@@ -495,18 +513,8 @@ def superpixels(
         c_ok = (row_l[cc] >= 0) & (row_l[cc] == col_l[rc])
         c_l = jnp.where(c_ok, row_l[cc], -1)[None]
         c_d = jnp.where(c_ok, 0.5 * (row_d[cc] + col_d[rc]), 0.0)[None]
-        c_l, c_d = propagate_labels(
-            lab_row[cc][None],
-            c_l,
-            c_d,
-            jnp.zeros((1, 2), jnp.float32),
-            cmp_lab,
-            cmp_off,
-            config.w_colour,
-            config.w_spatial,
-            config.w_photo,
-            radius=config.propagation_radius,
-            passes=config.propagation_passes,
+        c_l, c_d = _propagate(
+            config, lab_row[cc][None], c_l, c_d, jnp.zeros((1, 2), jnp.float32), cmp_lab, cmp_off
         )
         c_l, c_d = nearest_fill(c_l, c_d)
         if config.smooth_radius > 0:
@@ -530,18 +538,8 @@ def superpixels(
     cross_l = jnp.concatenate([labels[rc], labels[:, cc]])
     cross_d = jnp.concatenate([disp[rc], disp[:, cc]])
     cross_lab = jnp.concatenate([lab_row, lab_col])
-    cross_l, cross_d = propagate_labels(
-        cross_lab,
-        cross_l,
-        cross_d,
-        jnp.asarray(_cross_offsets(U, V)),
-        cmp_lab,
-        cmp_off,
-        config.w_colour,
-        config.w_spatial,
-        config.w_photo,
-        radius=config.propagation_radius,
-        passes=config.propagation_passes,
+    cross_l, cross_d = _propagate(
+        config, cross_lab, cross_l, cross_d, jnp.asarray(_cross_offsets(U, V)), cmp_lab, cmp_off
     )
     labels, disp = _fill_from_cross(
         labels, disp, cross_l[:V], cross_d[:V], cross_l[V:], cross_d[V:]
@@ -626,18 +624,15 @@ def kmeans_superpixels(
     labels, disp = _project_centre(centre, jnp.asarray(d), offsets)
     consistent = float(jnp.mean(labels >= 0))
     zeros = jnp.zeros((1, H, W, 3), jnp.float32)
-    labels, disp = propagate_labels(
+    labels, disp = _propagate(
+        config,
         lab_views.reshape(U * V, H, W, 3),
         labels,
         disp,
         offsets,
         zeros,
         jnp.zeros((1, 2), jnp.float32),
-        config.w_colour,
-        config.w_spatial,
-        jnp.float32(0.0),
-        radius=config.propagation_radius,
-        passes=config.propagation_passes,
+        w_photo=jnp.float32(0.0),
     )
     labels, disp = nearest_fill(labels, disp)
     labels, disp = jax.block_until_ready((labels.reshape(U, V, H, W), disp.reshape(U, V, H, W)))

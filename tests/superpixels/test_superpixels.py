@@ -109,7 +109,9 @@ def test_match_lines_unknown_surface_between_two_objects():
     assert len(gap) == 1 and gap[0][5] == 0.0
 
 
-def _segments(rows: list[tuple[float, float, float, float, float]]) -> EPISegments:
+def _segments(rows: list[tuple[float, float, float, float, float]], **surfaces) -> EPISegments:
+    """One EPI of known, valid, uncut segments ``(left_pos, left_disp, right_pos, right_disp,
+    disparity)``; ``surfaces`` may give ``surface_left`` / ``surface_right``."""
     a = jnp.asarray(np.array(rows, np.float32)[None])
     ones = jnp.ones(a.shape[:2], bool)
     return EPISegments(
@@ -123,6 +125,7 @@ def _segments(rows: list[tuple[float, float, float, float, float]]) -> EPISegmen
         right_cut=~ones,
         valid=ones,
         n_dropped=jnp.zeros((), jnp.int32),
+        **surfaces,
     )
 
 
@@ -145,19 +148,9 @@ def test_render_segments_depth_order():
 def test_render_segments_slanted_disparity():
     # one segment over the whole centre row, surface 0 at its left line and 1 at its right
     # (both lines fixed: disparity 0): pixel x has disparity (x + 0.5) / 8 in every row
-    a = jnp.asarray(np.array([[-0.5, 0.0, 7.5, 0.0, 0.0]], np.float32)[None])
     ones = jnp.ones((1, 1), bool)
-    seg = EPISegments(
-        left_pos=a[..., 0],
-        left_disp=a[..., 1],
-        right_pos=a[..., 2],
-        right_disp=a[..., 3],
-        disparity=a[..., 4],
-        known=ones,
-        left_cut=~ones,
-        right_cut=~ones,
-        valid=ones,
-        n_dropped=jnp.zeros((), jnp.int32),
+    seg = _segments(
+        [(-0.5, 0.0, 7.5, 0.0, 0.0)],
         surface_left=jnp.zeros((1, 1)),
         surface_right=jnp.ones((1, 1)),
     )
