@@ -35,22 +35,23 @@ class BoundStage:
     """A compiled stage bound to its arguments; calling it runs the stage.
 
     Attributes:
-        func: the `jax.stages.Compiled` executable.
-        args: its positional arguments.
-        out_tree: the result's tree structure when ``func`` returns flat leaves, else None.
+        func: the `jax.stages.Compiled` executable, over the flat array leaves of the stage's
+            arguments, returning the flat leaves of its result.
+        args: those array leaves.
+        out_tree: the result's tree structure.
     """
 
     func: Any
     args: tuple
-    out_tree: Any = None
+    out_tree: Any
 
     def __call__(self):
-        out = self.func(*self.args)
-        return out if self.out_tree is None else jax.tree.unflatten(self.out_tree, out)
+        return jax.tree.unflatten(self.out_tree, self.func(*self.args))
 
 
-def _export(fn: Callable, treedef, leaves, stat, static: dict):
-    """``fn`` over flat array arguments and results, exported (`jax.export`)."""
+def _flat(fn: Callable, treedef, stat, static: dict):
+    """``fn`` over flat array arguments and results, and a dict that holds the result's tree
+    structure (``"tree"``) once it has been traced."""
     box = {}
 
     def flat(*flat_args):
@@ -58,14 +59,7 @@ def _export(fn: Callable, treedef, leaves, stat, static: dict):
         out_leaves, box["tree"] = jax.tree.flatten(out)
         return out_leaves
 
-    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
-    exported = jax.export.export(jax.jit(flat))(*specs)
-    return exported, box["tree"]
-
-
-def _compile_exported(exported, leaves):
-    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
-    return jax.jit(exported.call).lower(*specs).compile()
+    return flat, box
 
 
 class StageCache:
@@ -123,7 +117,7 @@ class StageCache:
         seconds = 0.0
         if entry is None:
             t0 = time.perf_counter()
-            entry = self._compile(fn, dyn, stat, static, leaves, treedef, avals, static_items)
+            entry = self._compile(fn, stat, static, leaves, treedef, avals, static_items)
             seconds = time.perf_counter() - t0
             self._entries[key] = entry
             while len(self._entries) > self.maxsize:
@@ -131,37 +125,31 @@ class StageCache:
         else:
             self._entries.move_to_end(key)
         compiled, out_tree = entry
-        if out_tree is None:
-            return BoundStage(compiled, (dyn,)), seconds
         return BoundStage(compiled, tuple(leaves), out_tree), seconds
 
-    def _compile(self, fn, dyn, stat, static, leaves, treedef, avals, static_items):
-        """``(compiled, out_tree)``: over flat leaves when the stage goes through the disk
-        store (``out_tree`` its result structure), else over ``dyn`` (``out_tree`` None)."""
+    def _compile(self, fn, stat, static, leaves, treedef, avals, static_items):
+        """``(compiled, out_tree)`` of the stage over its flat array leaves: from the disk
+        store when it holds the stage, else traced (and exported to the store when the stage
+        is one it keeps)."""
         disk_key = self._disk_key(fn, treedef, avals, stat, static_items)
         if disk_key is not None:
             stored = self.store.load(disk_key)
             if stored is not None:
                 exported, out_tree = stored
-                compiled = _compile_exported(exported, leaves)
                 self.loads += 1
-                return compiled, out_tree
+                return jax.jit(exported.call).lower(*leaves).compile(), out_tree
+        flat, box = _flat(fn, treedef, stat, static)
+        self.compilations += 1
+        if disk_key is not None:
+            specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
             try:
-                exported, out_tree = _export(fn, treedef, leaves, stat, static)
+                exported = jax.export.export(jax.jit(flat))(*specs)
             except Exception as err:  # not exportable: compile it directly, in memory only
                 log.info("%s not exported (%s); compiled without the disk store", fn, err)
             else:
-                compiled = _compile_exported(exported, leaves)
-                self.compilations += 1
-                self.store.save(disk_key, exported, out_tree)
-                return compiled, out_tree
-
-        def call(dyn_args):
-            return fn(*eqx.combine(dyn_args, stat), **static)
-
-        compiled = jax.jit(call).lower(dyn).compile()
-        self.compilations += 1
-        return compiled, None
+                self.store.save(disk_key, exported, box["tree"])
+                return jax.jit(exported.call).lower(*leaves).compile(), box["tree"]
+        return jax.jit(flat).lower(*leaves).compile(), box["tree"]
 
     def _disk_key(self, fn, treedef, avals, stat, static_items) -> str | None:
         if self.store is None or self.store.path is None:

@@ -37,7 +37,7 @@ def test_a_new_cache_compiles_a_stored_stage_without_tracing(tmp_path, rgb, monk
     assert (first.compilations, first.loads) == (1, 0)
     assert len(list(tmp_path.glob("*.bin"))) == 1
 
-    monkeypatch.setattr(_compile, "_export", _no_tracing)
+    monkeypatch.setattr(_compile, "_flat", _no_tracing)
     second = StageCache(store=_cache.StageStore(tmp_path))
     run, seconds = second.compile(rgb_to_lab, rgb)
     assert (second.compilations, second.loads) == (0, 1)
