@@ -281,6 +281,56 @@ def _mode_filter(labels: Int[Array, "H W"], radius: int) -> Int[Array, "H W"]:
     return best
 
 
+@functools.partial(jax.jit, static_argnames=("n_labels", "iters", "radius"))
+def _refine_centre(
+    labels: Int[Array, "H W"],
+    feats: Float[Array, "H W F"],
+    n_labels: int,
+    iters: int,
+    radius: int,
+) -> Int[Array, "H W"]:
+    """Local k-means of the centre view's pixels from given labels (SLIC-style; not in the
+    thesis).
+
+    Every iteration re-estimates each label's centre (the mean of ``feats`` over its pixels),
+    then moves every pixel to the nearest centre (squared Euclidean distance in ``feats``)
+    among the labels at the 17 offsets ``{-1, 0, 1}² ∪ {-radius, 0, radius}²`` around it
+    (edge-padded; its own label included). A label whose pixels all leave keeps no centre and
+    cannot return.
+
+    Args:
+        labels: ``(H, W)`` int32 labels in ``[0, n_labels)``.
+        feats: ``(H, W, F)`` float32 weighted pixel features (`_features`: x, y, normalised
+            disparity, CIELAB).
+        n_labels: static number of labels.
+        iters: static number of iterations.
+        radius: static candidate distance (pixels, chessboard).
+
+    Returns:
+        ``(H, W)`` int32 labels in ``[0, n_labels)``.
+    """
+    H, W, F = feats.shape
+    r = max(int(radius), 1)
+    offs = sorted({(a * s, b * s) for s in (1, r) for a in (-1, 0, 1) for b in (-1, 0, 1)})
+    flat_f = feats.reshape(-1, F)
+
+    def body(_, lab):
+        ids = lab.ravel()
+        cnt = jax.ops.segment_sum(jnp.ones((H * W,), jnp.float32), ids, n_labels)
+        tot = jax.ops.segment_sum(flat_f, ids, n_labels)
+        centres = tot / jnp.maximum(cnt, 1.0)[:, None]
+        p = jnp.pad(lab, r, mode="edge")
+        best, best_d = lab, jnp.sum((feats - centres[lab]) ** 2, -1)
+        for dy, dx in offs:
+            cand = p[r + dy : r + dy + H, r + dx : r + dx + W]
+            dist = jnp.sum((feats - centres[cand]) ** 2, -1)
+            better = dist < best_d
+            best, best_d = jnp.where(better, cand, best), jnp.where(better, dist, best_d)
+        return best
+
+    return jax.lax.fori_loop(0, iters, body, labels)
+
+
 def _fragments(labels: np.ndarray) -> np.ndarray:
     """``(H, W)`` bool: the pixels outside the largest 4-connected piece of their label (SciPy
     connected components of the graph of equal-label neighbours; ties: the first piece)."""
@@ -301,6 +351,27 @@ def _fragments(labels: np.ndarray) -> np.ndarray:
     keep = np.zeros(n, bool)
     keep[order[first]] = True
     return ~keep[piece].reshape(H, W)
+
+
+def _refine_centre_dense(c_l, lab_c, d_c, lo, span, k, config):
+    """`_refine_centre` of the centre labels ``c_l (1, H, W)`` int32 in ``[0, k)`` on the
+    features of `_features` per pixel: x, y (pixels), the dense centre disparity ``d_c (H, W)``
+    (pixels per view step) normalised by ``lo`` and ``span``, and the centre CIELAB
+    ``lab_c (H, W, 3)`` (L* in [0, 100]); returns ``(1, H, W)`` int32."""
+    H, W = d_c.shape
+    y, x = jnp.meshgrid(
+        jnp.arange(H, dtype=jnp.float32), jnp.arange(W, dtype=jnp.float32), indexing="ij"
+    )
+    feats = jnp.concatenate(
+        [
+            config.weight_xy * jnp.stack([x, y], -1),
+            config.weight_d * ((d_c - lo) / span)[..., None],
+            config.weight_lab * config.lab_scale * lab_c,
+        ],
+        -1,
+    ).astype(jnp.float32)
+    radius = config.refine_radius or max(1, round(config.size / 2))
+    return _refine_centre(c_l[0], feats, int(k), config.refine_iters, radius)[None]
 
 
 def _cross_offsets(U: int, V: int) -> np.ndarray:
@@ -402,7 +473,11 @@ def superpixels(
             baseline; unreached pixels look back into the centre view with their own view's
             disparity and take its label where the centre disparity there is within
             ``config.dense_tol``); the remaining holes are filled as in step 4, and the
-            returned ``disparity`` is this input. Ignored with ``centre_first=False``.
+            returned ``disparity`` is this input. With ``config.refine_iters > 0`` the
+            completed centre labels first pass that many iterations of a local k-means of
+            the centre pixels on the clustering's features with this map's centre view as
+            ``d`` (`_refine_centre`), before the majority filter. Ignored with
+            ``centre_first=False``.
 
     Returns:
         A `SuperpixelResult` with ``labels`` and ``disparity`` of shape ``(U, V, H, W)``.
@@ -517,6 +592,8 @@ def superpixels(
             config, lab_row[cc][None], c_l, c_d, jnp.zeros((1, 2), jnp.float32), cmp_lab, cmp_off
         )
         c_l, c_d = nearest_fill(c_l, c_d)
+        if disparity is not None and config.refine_iters > 0:
+            c_l = _refine_centre_dense(c_l, lab_row[cc], disparity[rc, cc], lo, span, k, config)
         if config.smooth_radius > 0:
             c_l = _mode_filter(c_l[0], config.smooth_radius)[None]
         if config.connected:
