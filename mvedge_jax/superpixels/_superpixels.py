@@ -359,17 +359,11 @@ def _refine_centre_dense(c_l, lab_c, d_c, lo, span, k, config):
     (pixels per view step) normalised by ``lo`` and ``span``, and the centre CIELAB
     ``lab_c (H, W, 3)`` (L* in [0, 100]); returns ``(1, H, W)`` int32."""
     H, W = d_c.shape
-    y, x = jnp.meshgrid(
-        jnp.arange(H, dtype=jnp.float32), jnp.arange(W, dtype=jnp.float32), indexing="ij"
+    y, x = np.mgrid[0:H, 0:W]
+    flat = _features(
+        x.ravel(), y.ravel(), np.ravel(d_c), np.reshape(lab_c, (-1, 3)), lo, span, config
     )
-    feats = jnp.concatenate(
-        [
-            config.weight_xy * jnp.stack([x, y], -1),
-            config.weight_d * ((d_c - lo) / span)[..., None],
-            config.weight_lab * config.lab_scale * lab_c,
-        ],
-        -1,
-    ).astype(jnp.float32)
+    feats = jnp.asarray(flat.reshape(H, W, -1), jnp.float32)
     radius = config.refine_radius or max(1, round(config.size / 2))
     return _refine_centre(c_l[0], feats, int(k), config.refine_iters, radius)[None]
 
