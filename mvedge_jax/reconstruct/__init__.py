@@ -19,6 +19,7 @@ from ._oracle import oracle_edges as oracle_edges
 from ._photo import photo_cost as photo_cost
 from ._photo import photo_refine as photo_refine
 from ._photo import photo_select as photo_select
+from ._photo import photo_sweep as photo_sweep
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
 from ._reconstruct import propagate as propagate

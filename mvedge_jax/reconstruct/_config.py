@@ -78,6 +78,9 @@ class SharpenConfig(eqx.Module):
             background colours differ by at least this (guide units).
         matte_impure_weight: (threshold) weight of window pixels on a discontinuity in the colour
             means.
+        sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
+            view step. Smooth where the chosen hypothesis does not change (the hypotheses
+            scale with it).
 
     Attributes (static):
         enabled: apply the weighted median filter to the centre disparity (Sec. 6.1).
@@ -106,6 +109,16 @@ class SharpenConfig(eqx.Module):
         refine_radius: window radius of that test (candidates: window min and max).
         refine_iterations: passes of the centre-view refinement.
         refine_aggregate: radius of the colour-weighted cost aggregation of that test.
+        sweep_steps: after the snapping and the matte and before the weighted median,
+            correct every centre pixel by a local plane sweep of this many hypotheses
+            (`photo_sweep` against the cross-hair views; odd, ≥ 3; 0 = off; not in the
+            thesis).
+        sweep_ssim: weight of the SSIM dissimilarity in the sweep's colour cost (0: colour
+            L1 only, and the SSIM term is not computed).
+        sweep_aggregate: radius of the colour-weighted cost aggregation of the sweep.
+        sweep_min_offset: the sweep uses the cross-hair views at least this many view steps
+            from the centre (all of them when the light field has no such view): the
+            nearest views add little disparity resolution for their cost.
         matte: after the snapping and before the weighted median, put every pixel on a depth
             discontinuity of the centre map on the side its colour mixture says
             (`boundary_matte`; not in the thesis).
@@ -129,6 +142,7 @@ class SharpenConfig(eqx.Module):
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
+    sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     enabled: bool = static(True)
     filter: str = static("median", choices=SHARPEN_FILTERS)
     wmf_radius: int = static(7, lower=1, upper=64)
@@ -140,6 +154,10 @@ class SharpenConfig(eqx.Module):
     refine_radius: int = static(3, lower=1, upper=64)
     refine_iterations: int = static(12, lower=0, upper=1000)
     refine_aggregate: int = static(2, lower=0, upper=64)
+    sweep_steps: int = static(9, lower=0, upper=101)
+    sweep_ssim: float = static(0.0, lower=0.0)
+    sweep_aggregate: int = static(2, lower=0, upper=64)
+    sweep_min_offset: int = static(2, lower=1, upper=64)
     matte: bool = static(True)
     matte_views: bool = static(True)
     matte_radius: int = static(2, lower=1, upper=64)
@@ -147,6 +165,11 @@ class SharpenConfig(eqx.Module):
 
     def __check_init__(self):
         check_fields(self)
+        if self.sweep_steps != 0 and (self.sweep_steps < 3 or self.sweep_steps % 2 == 0):
+            raise ValueError(
+                f"SharpenConfig.sweep_steps must be 0 (off) or an odd integer >= 3; "
+                f"got {self.sweep_steps}"
+            )
 
 
 class SelectConfig(eqx.Module):

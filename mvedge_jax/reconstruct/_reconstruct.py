@@ -25,7 +25,7 @@ from ._crosshair import (
     solve_epis,
 )
 from ._matte import boundary_matte
-from ._photo import photo_refine, photo_select
+from ._photo import photo_refine, photo_select, photo_sweep
 from ._wmf import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -181,6 +181,17 @@ def _cross_hair_views(views: Array) -> tuple[Array, Array]:
     return views[idx[:, 0], idx[:, 1]], jnp.asarray(idx, views.dtype)
 
 
+def _sweep_positions(U: int, V: int, min_offset: int) -> np.ndarray:
+    """``(K, 2)`` ``(row, col)`` of the cross-hair views at least ``min_offset`` view steps
+    from the centre (every cross-hair view but the centre when none is that far)."""
+    rc, cc = U // 2, V // 2
+    pos = np.asarray(
+        [(rc, c) for c in range(V) if c != cc] + [(r, cc) for r in range(U) if r != rc]
+    )
+    dist = np.abs(pos - np.array([rc, cc])).sum(axis=1)
+    return pos[dist >= min(min_offset, int(dist.max()))]
+
+
 def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, iterations: int):
     """`photo_refine` of view ``(row, col)`` against the cross-hair views."""
     if iterations == 0:
@@ -251,6 +262,19 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
         sharp = _matte(sharp, colour_guide(views[rc, cc], config.colour_space), config)
+    if sc.sweep_steps:
+        pos = _sweep_positions(U, V, sc.sweep_min_offset)
+        offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)
+        sharp = photo_sweep(
+            sharp,
+            views[rc, cc],
+            views[pos[:, 0], pos[:, 1]],
+            offsets,
+            steps=sc.sweep_steps,
+            search=sc.sweep_search,
+            aggregate=sc.sweep_aggregate,
+            ssim=sc.sweep_ssim,
+        )
     slope = None
     if sc.enabled and sc.wmf_slope_baseline > 0:
         slope = disparity_slopes(sharp, baseline=sc.wmf_slope_baseline, max_slope=sc.wmf_slope_max)
@@ -289,12 +313,18 @@ def sharpen(
     removes the foreground halos that labels on the wrong side of an occlusion edge leave).
     With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
     its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
+    ``config.sharpen.sweep_steps``: every pixel is corrected by a local plane sweep of
+    ``sweep_steps`` hypotheses within ``± sweep_search`` (`photo_sweep` against the
+    cross-hair views at least ``sweep_min_offset`` steps away; not in the thesis: the
+    interpolated Ch. 6 map is only as exact as the interpolation, the colours say more
+    where there is texture). With
     ``config.sharpen.enabled``: `weighted_median_filter` guided by the centre view (thesis
     Sec. 6.1, r = 7; Sec. 7.2.1 uses the same filter to post-process the Ch. 7 result); with
     ``config.sharpen.wmf_slope_baseline > 0`` its samples enter extrapolated to the window
     centre along their own `disparity_slopes` (first-order filtering, not in the thesis: the
     plain median flattens slanted surfaces).
-    All off: the map is returned unchanged. jit-compiled (`equinox.filter_jit`).
+    All off (``sweep_steps = 0``): the map is returned unchanged. jit-compiled
+    (`equinox.filter_jit`).
 
     Args:
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
@@ -543,7 +573,8 @@ def reconstruct(
     2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
        side with the cross-hair views (`photo_refine`, ``config.sharpen.refine``; not in the
        thesis: it removes the foreground halos that labels on the wrong side of an occlusion
-       edge leave), `boundary_matte` (``config.sharpen.matte``), then
+       edge leave), `boundary_matte` (``config.sharpen.matte``), the local plane sweep
+       `photo_sweep` (``config.sharpen.sweep_steps``; not in the thesis), then
        `weighted_median_filter` guided by the centre view (``config.sharpen.enabled``;
        first-order along `disparity_slopes` with ``config.sharpen.wmf_slope_baseline > 0``).
     3. Forward projection into every view of the central cross-hair (z-buffer, holes kept).

@@ -36,7 +36,9 @@ def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
         (dict(), 1.8, 1.6),
         (
             dict(
-                sharpen=SharpenConfig(enabled=False, refine=False, matte=False, matte_views=False),
+                sharpen=SharpenConfig(
+                    enabled=False, refine=False, matte=False, matte_views=False, sweep_steps=0
+                ),
                 epi=EpiConfig(cross_hair_fill=False, min_confidence=0.0),
                 fill=FillConfig(min_confidence=0.0, hole_weight=10.0),
             ),

@@ -37,8 +37,10 @@ def test_sharpen_reproduces_reconstruct(small_scene, full_run):
     lf, _, _ = small_scene
     out = sharpen(lf.views, full_run.centre, ReconstructConfig())
     np.testing.assert_array_equal(out, full_run.centre_sharp)
-    # both steps off: the identity
-    off = ReconstructConfig(sharpen=SharpenConfig(enabled=False, refine=False, matte=False))
+    # every step off: the identity
+    off = ReconstructConfig(
+        sharpen=SharpenConfig(enabled=False, refine=False, matte=False, sweep_steps=0)
+    )
     plain = sharpen(lf.views, full_run.centre, off)
     np.testing.assert_array_equal(plain, full_run.centre)
 
