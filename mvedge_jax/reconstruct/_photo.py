@@ -309,9 +309,9 @@ def photo_sweep(
     c0, c1, c2 = (jnp.take_along_axis(costs, (inner + k)[None], 0)[0] for k in (-1, 0, 1))
     curvature = c0 - 2.0 * c1 + c2
     finite = jnp.isfinite(c0) & jnp.isfinite(c1) & jnp.isfinite(c2)
-    safe = jnp.where(finite & (curvature > 0), curvature, 1.0)
-    vertex = jnp.where(finite & (curvature > 0), 0.5 * (c0 - c2) / safe, 0.0)
-    vertex = jnp.clip(jnp.where(finite, vertex, 0.0), -0.5, 0.5)
+    convex = finite & (curvature > 0)
+    vertex = jnp.where(convex, 0.5 * (c0 - c2) / jnp.where(convex, curvature, 1.0), 0.0)
+    vertex = jnp.clip(vertex, -0.5, 0.5)
     # Hypotheses are 2 / (steps − 1) apart in units of ``search``.
     moved = disparity + (unit[inner] + 2.0 * vertex / (steps - 1)) * search
     take = (best > 0) & (best < steps - 1) & finite

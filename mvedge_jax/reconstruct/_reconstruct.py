@@ -172,24 +172,25 @@ def _cross_hair_fill(maps, valid, conf, centre: int, config: ReconstructConfig):
     return jax.vmap(one)(maps, valid, conf).at[centre].set(maps[centre])
 
 
+def _cross_hair_positions(U: int, V: int) -> np.ndarray:
+    """``(U + V - 1, 2)`` ``(row, col)`` of the cross-hair views: the centre row, then the
+    centre column without the centre."""
+    rc, cc = U // 2, V // 2
+    return np.asarray([(rc, c) for c in range(V)] + [(r, cc) for r in range(U) if r != rc])
+
+
 def _cross_hair_views(views: Array) -> tuple[Array, Array]:
     """The ``K = U + V - 1`` cross-hair views and their ``(row, col)`` positions."""
-    U, V = views.shape[:2]
-    rc, cc = U // 2, V // 2
-    pos = [(rc, c) for c in range(V)] + [(r, cc) for r in range(U) if r != rc]
-    idx = np.asarray(pos)
+    idx = _cross_hair_positions(*views.shape[:2])
     return views[idx[:, 0], idx[:, 1]], jnp.asarray(idx, views.dtype)
 
 
 def _sweep_positions(U: int, V: int, min_offset: int) -> np.ndarray:
     """``(K, 2)`` ``(row, col)`` of the cross-hair views at least ``min_offset`` view steps
     from the centre (every cross-hair view but the centre when none is that far)."""
-    rc, cc = U // 2, V // 2
-    pos = np.asarray(
-        [(rc, c) for c in range(V) if c != cc] + [(r, cc) for r in range(U) if r != rc]
-    )
-    dist = np.abs(pos - np.array([rc, cc])).sum(axis=1)
-    return pos[dist >= min(min_offset, int(dist.max()))]
+    pos = _cross_hair_positions(U, V)
+    dist = np.abs(pos - np.array([U // 2, V // 2])).sum(axis=1)
+    return pos[(dist > 0) & (dist >= min(min_offset, int(dist.max())))]
 
 
 def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, iterations: int):
