@@ -186,6 +186,32 @@ def _fill_from_cross(labels, disp, row_l, row_d, col_l, col_d):
     return jnp.where(take_v, lv, labels), jnp.where(take_v, dv, disp)
 
 
+def _view_offsets(U: int, V: int) -> np.ndarray:
+    """``(U V, 2)`` float32 ``(dr, dc)`` of every view relative to the centre, row-major."""
+    rs, cs = np.meshgrid(np.arange(U) - U // 2, np.arange(V) - V // 2, indexing="ij")
+    return np.stack([rs.ravel(), cs.ravel()], -1).astype(np.float32)
+
+
+@jax.jit
+def _project_centre(centre_l, centre_d, offsets):
+    """Centre labels ``(H, W)`` forward-projected (z-buffered) with the centre disparity into
+    the views at ``offsets (K, 2)``: ``(labels, disparity)`` of shape ``(K, H, W)``."""
+    return jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(offsets)
+
+
+def _look_back(disparity, dr, dc):
+    """Nearest centre-view pixel ``(cy, cx)`` (clipped into the image) of every pixel of views
+    at offsets ``dr, dc`` (broadcast against ``disparity (..., H, W)``) moved back to the
+    centre by its own disparity, and whether it lies inside the image."""
+    H, W = disparity.shape[-2:]
+    y = jnp.arange(H, dtype=jnp.float32)[:, None]
+    x = jnp.arange(W, dtype=jnp.float32)[None, :]
+    cy = jnp.rint(y + dr * disparity).astype(jnp.int32)
+    cx = jnp.rint(x + dc * disparity).astype(jnp.int32)
+    inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
+    return jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1), inside
+
+
 @jax.jit
 def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
     """Labels of every view from both segmentations, checked against the fully labelled
@@ -201,28 +227,22 @@ def _project_resolve(row_l, row_d, col_l, col_d, centre_l, centre_d):
     the two segmentations agree.
     """
     lh, dh, lv, dv = _project_both(row_l, row_d, col_l, col_d)
-    U, V, H, W = lh.shape
+    U, V = lh.shape[:2]
     agree = (lh >= 0) & (lh == lv)
-    dr = (jnp.arange(U) - U // 2).astype(jnp.float32)[:, None, None, None]
-    dc = (jnp.arange(V) - V // 2).astype(jnp.float32)[None, :, None, None]
-    y = jnp.arange(H, dtype=jnp.float32)[:, None]
-    x = jnp.arange(W, dtype=jnp.float32)[None, :]
+    off = _view_offsets(U, V)
+    dr = off[:, 0].reshape(U, V, 1, 1)
+    dc = off[:, 1].reshape(U, V, 1, 1)
 
     def matches(lab, d):
-        cy = jnp.rint(y + dr * d).astype(jnp.int32)
-        cx = jnp.rint(x + dc * d).astype(jnp.int32)
-        inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
-        back = centre_l[jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)]
-        return (lab >= 0) & inside & (back == lab)
+        cy, cx, inside = _look_back(d, dr, dc)
+        return (lab >= 0) & inside & (centre_l[cy, cx] == lab)
 
     mh, mv = matches(lh, dh), matches(lv, dv)
     use_v = mv & (~mh | (dv > dh))
     keep = agree & (mh | mv)
     lab = jnp.where(keep, lh, jnp.where(use_v, lv, jnp.where(mh, lh, -1)))
     d = jnp.where(keep, 0.5 * (dh + dv), jnp.where(use_v, dv, jnp.where(mh, dh, 0.0)))
-    rs, cs = jnp.meshgrid(jnp.arange(U) - U // 2, jnp.arange(V) - V // 2, indexing="ij")
-    off = jnp.stack([rs.ravel(), cs.ravel()], -1).astype(jnp.float32)
-    pl, pd = jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(off)
+    pl, pd = _project_centre(centre_l, centre_d, jnp.asarray(off))
     pl, pd = pl.reshape(lab.shape), pd.reshape(lab.shape)
     take = (lab < 0) & (pl >= 0)
     return jnp.where(take, pl, lab), jnp.where(take, pd, d), agree
@@ -242,18 +262,12 @@ def _project_dense(centre_l, disparity, tol):
     """
     U, V, H, W = disparity.shape
     centre_d = disparity[U // 2, V // 2]
-    rs, cs = jnp.meshgrid(jnp.arange(U) - U // 2, jnp.arange(V) - V // 2, indexing="ij")
-    off = jnp.stack([rs.ravel(), cs.ravel()], -1).astype(jnp.float32)
-    pl, _ = jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(off)
+    off = _view_offsets(U, V)
+    pl, _ = _project_centre(centre_l, centre_d, jnp.asarray(off))
     pl = pl.reshape(U, V, H, W)
-    dr = off[:, 0].reshape(U, V, 1, 1)
-    dc = off[:, 1].reshape(U, V, 1, 1)
-    y = jnp.arange(H, dtype=jnp.float32)[:, None]
-    x = jnp.arange(W, dtype=jnp.float32)[None, :]
-    cy = jnp.rint(y + dr * disparity).astype(jnp.int32)
-    cx = jnp.rint(x + dc * disparity).astype(jnp.int32)
-    inside = (cy >= 0) & (cy < H) & (cx >= 0) & (cx < W)
-    cy, cx = jnp.clip(cy, 0, H - 1), jnp.clip(cx, 0, W - 1)
+    cy, cx, inside = _look_back(
+        disparity, off[:, 0].reshape(U, V, 1, 1), off[:, 1].reshape(U, V, 1, 1)
+    )
     seen = inside & (jnp.abs(centre_d[cy, cx] - disparity) <= tol)
     back = jnp.where(seen, centre_l[cy, cx], -1)
     labels = jnp.where(pl >= 0, pl, back)
@@ -632,11 +646,6 @@ def superpixels(
     )
 
 
-@jax.jit
-def _project_centre(centre_l, centre_d, offsets):
-    return jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(offsets)
-
-
 def kmeans_superpixels(
     lf: LightField,
     disparity: Float[ArrayLike, "H W"],
@@ -690,8 +699,7 @@ def kmeans_superpixels(
     centre = jnp.asarray(centre.reshape(H, W))
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rs, cs = np.meshgrid(np.arange(U) - U // 2, np.arange(V) - V // 2, indexing="ij")
-    offsets = jnp.asarray(np.stack([rs.ravel(), cs.ravel()], -1), jnp.float32)
+    offsets = jnp.asarray(_view_offsets(U, V))
     labels, disp = _project_centre(centre, jnp.asarray(d), offsets)
     consistent = float(jnp.mean(labels >= 0))
     zeros = jnp.zeros((1, H, W, 3), jnp.float32)
