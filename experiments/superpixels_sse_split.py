@@ -38,51 +38,39 @@ import argparse
 import numpy as np
 
 
-def _per_superpixel(sp, n, px, py, mask, U, V):
+def _per_superpixel(sp, n, px, py, mask):
     """``(n,)`` SSE per superpixel of compact labels ``sp (U, V, H, W)`` over ``mask`` pixels
-    whose centre-view coordinates are ``px, py``."""
-    view = np.broadcast_to(np.arange(U * V).reshape(U, V, 1, 1), sp.shape)[mask]
-    key = sp[mask] * (U * V) + view
-    cnt = np.bincount(key, minlength=n * U * V).reshape(n, -1)
-    sx = np.bincount(key, px[mask], minlength=n * U * V).reshape(n, -1)
-    sy = np.bincount(key, py[mask], minlength=n * U * V).reshape(n, -1)
-    has = cnt > 0
-    cx = np.where(has, sx / np.maximum(cnt, 1), 0.0)
-    cy = np.where(has, sy / np.maximum(cnt, 1), 0.0)
-    nv = np.maximum(has.sum(1), 1)
-    mx, my = cx.sum(1) / nv, cy.sum(1) / nv
-    return (np.hypot(cx - mx[:, None], cy - my[:, None]) * has).sum(1) / nv
+    whose centre-view coordinates are ``px, py`` (0 for a superpixel absent from ``mask``)."""
+    from mvedge_jax.metrics._superpixel import _centroid_deviation
+
+    dev, nv = _centroid_deviation(sp, n, px, py, mask)
+    return dev / np.maximum(nv, 1)
 
 
 def split(labels, gt, gt_centre) -> dict:
     """The numbers listed in the module docstring for ``labels (U, V, H, W)`` int, with the
     per-view ground truth ``gt (U, V, H, W)`` (NaN unknown) and ``gt_centre (H, W)`` (px per
     view step)."""
-    import jax
     import jax.numpy as jnp
 
-    from mvedge_jax.metrics._superpixel import _compact
-    from mvedge_jax.superpixels._label import forward_labels
+    from mvedge_jax.metrics._superpixel import _centre_coordinates, _compact
+    from mvedge_jax.superpixels._superpixels import _project_centre, _view_offsets
 
     U, V, H, W = labels.shape
     sp, n = _compact(np.asarray(labels))
     sp = sp.astype(np.int64)
-    dr = (np.arange(U) - U // 2)[:, None, None, None]
-    dc = (np.arange(V) - V // 2)[None, :, None, None]
-    y, x = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
     ok = np.isfinite(gt)
     d = np.where(ok, gt, 0.0)
-    px, py = x + dc * d, y + dr * d
+    px, py = _centre_coordinates(gt)
     out = ok & ((px < -0.5) | (px > W - 0.5) | (py < -0.5) | (py > H - 0.5))
     a = (U // 2) * np.abs(d)
     core = ok & (px - a >= -0.5) & (px + a <= W - 0.5) & (py - a >= -0.5) & (py + a <= H - 0.5)
     c = sp[U // 2, V // 2]
-    offs = jnp.asarray(np.stack([dr.ravel().repeat(V), np.tile(dc.ravel(), U)], -1), jnp.float32)
-    proj = jax.vmap(
-        lambda o: forward_labels(
-            jnp.asarray(c, jnp.int32), jnp.asarray(gt_centre, jnp.float32), *o
-        )[0]
-    )(offs)
+    proj, _ = _project_centre(
+        jnp.asarray(c, jnp.int32),
+        jnp.asarray(gt_centre, jnp.float32),
+        jnp.asarray(_view_offsets(U, V)),
+    )
     proj = np.asarray(proj).reshape(sp.shape)
     reached = proj >= 0
     ideal = np.where(reached, proj, sp)
@@ -90,7 +78,7 @@ def split(labels, gt, gt_centre) -> dict:
     cx = np.clip(np.rint(px), 0, W - 1).astype(np.int64)
     canon = np.where(out, c[cy, cx], sp)
     fill = ok & ~reached & ~out
-    dev = _per_superpixel(sp, n, px, py, ok, U, V)
+    dev = _per_superpixel(sp, n, px, py, ok)
     area = np.bincount(c.ravel(), minlength=n)
     blen = np.zeros(n)
     for e in (c[0], c[-1], c[:, 0], c[:, -1]):
@@ -120,13 +108,13 @@ def split(labels, gt, gt_centre) -> dict:
         area_inner=float(area[inner].mean()),
         extent_border=float((area[border] / blen[border]).mean()),
         method=parts(dev),
-        gt_projected=parts(_per_superpixel(ideal, n, px, py, ok, U, V)),
-        core=parts(_per_superpixel(sp, n, px, py, core, U, V)),
+        gt_projected=parts(_per_superpixel(ideal, n, px, py, ok)),
+        core=parts(_per_superpixel(sp, n, px, py, core)),
         strip_pixels=int(out.sum()),
         strip_canonical_share=float((sp[out] == canon[out]).mean()) if out.any() else float("nan"),
-        strip_relabelled=parts(_per_superpixel(canon, n, px, py, ok, U, V)),
+        strip_relabelled=parts(_per_superpixel(canon, n, px, py, ok)),
         fill_share=float(fill.sum() / ok.sum()),
-        without_fill=parts(_per_superpixel(sp, n, px, py, ok & ~fill, U, V)),
+        without_fill=parts(_per_superpixel(sp, n, px, py, ok & ~fill)),
         worst=[
             dict(
                 error=float(dev[i]),
@@ -190,7 +178,7 @@ def main() -> None:
         gt = np.asarray(lf.gt_disparity, np.float64)
         gt_c = gt[U // 2, V // 2]
         if lf.gt_mask is not None and not np.asarray(lf.gt_mask).all():
-            gt = _project_centre_gt(gt_c, U, V)
+            gt = _project_centre_gt(gt_c)
         for size in args.sizes:
             cfg = SuperpixelConfig(size=float(size))
             print(f"{name} size {size}")

@@ -218,31 +218,47 @@ def self_similarity_error(labels: ArrayLike, gt_disparity: ArrayLike) -> float:
         Thesis Sec. 5.2.3; Zhu et al., "4D light field superpixel and segmentation", CVPR 2017.
     """
     lab, d = _check_lf(labels, gt_disparity)
-    U, V, H, W = lab.shape
     ok = np.isfinite(d)
     if not ok.any():
         raise ValueError("gt_disparity has no finite value")
     sp, n = _compact(lab)
+    px, py = _centre_coordinates(d)
+    dev, nv = _centroid_deviation(sp, n, px, py, ok)
+    keep = nv > 0
+    return float(np.mean(dev[keep] / nv[keep]))
+
+
+def _centre_coordinates(gt_disparity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(px, py)`` ``(U, V, H, W)``: every pixel of every view moved into the centre view
+    with its disparity (``(x + dc d, y + dr d)``; 0 where the disparity is not finite)."""
+    U, V, H, W = gt_disparity.shape
     dr = (np.arange(U) - U // 2)[:, None, None, None]
     dc = (np.arange(V) - V // 2)[None, :, None, None]
     y, x = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
-    dz = np.where(ok, d, 0.0)
-    px = (x + dc * dz)[ok]
-    py = (y + dr * dz)[ok]
-    view = np.broadcast_to(np.arange(U * V).reshape(U, V, 1, 1), lab.shape)[ok]
-    key = sp[ok] * (U * V) + view
+    dz = np.where(np.isfinite(gt_disparity), gt_disparity, 0.0)
+    return x + dc * dz, y + dr * dz
+
+
+def _centroid_deviation(
+    sp: np.ndarray, n: int, px: np.ndarray, py: np.ndarray, mask: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per superpixel of the compact labels ``sp (U, V, H, W)`` in ``[0, n)``, over the
+    ``mask`` pixels with centre-view coordinates ``px, py``: ``(sum of the distances of its
+    per-view centroids from their mean (n,), number of views it appears in (n,))``."""
+    U, V = sp.shape[:2]
+    view = np.broadcast_to(np.arange(U * V).reshape(U, V, 1, 1), sp.shape)[mask]
+    key = sp[mask] * (U * V) + view
     cnt = np.bincount(key, minlength=n * U * V).reshape(n, U * V)
-    cx = np.bincount(key, px, minlength=n * U * V).reshape(n, U * V)
-    cy = np.bincount(key, py, minlength=n * U * V).reshape(n, U * V)
+    cx = np.bincount(key, px[mask], minlength=n * U * V).reshape(n, U * V)
+    cy = np.bincount(key, py[mask], minlength=n * U * V).reshape(n, U * V)
     has = cnt > 0
     cx = np.where(has, cx / np.maximum(cnt, 1), 0.0)
     cy = np.where(has, cy / np.maximum(cnt, 1), 0.0)
     nv = has.sum(1)
-    keep = nv > 0
     mx = cx.sum(1) / np.maximum(nv, 1)
     my = cy.sum(1) / np.maximum(nv, 1)
     dev = np.hypot(cx - mx[:, None], cy - my[:, None]) * has
-    return float(np.mean(dev.sum(1)[keep] / nv[keep]))
+    return dev.sum(1), nv
 
 
 def labels_per_pixel(
