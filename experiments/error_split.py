@@ -64,7 +64,12 @@ from mvedge_jax.io import load_light_field  # noqa: E402
 from mvedge_jax.lightfield import rgb_to_lab  # noqa: E402
 from mvedge_jax.metrics import depth_metrics  # noqa: E402
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity  # noqa: E402
-from mvedge_jax.reconstruct import centre_disparity, sharpen  # noqa: E402
+from mvedge_jax.reconstruct import (  # noqa: E402
+    ReconstructConfig,
+    centre_disparity,
+    centre_seeds,
+    sharpen,
+)
 from mvedge_jax.reconstruct._oracle import oracle_edges  # noqa: E402
 from mvedge_jax.synthetic import VARIANTS, default_light_field, variant_scene  # noqa: E402
 
@@ -165,6 +170,15 @@ def run_pipeline(lf, config: PipelineConfig, cache: Path | None) -> dict:
     return out
 
 
+@eqx.filter_jit
+def diffuse_centre(views, edges, surface, config: ReconstructConfig):
+    """The centre diffusion of `reconstruct` (eq 6.1, with `centre_seeds` when
+    ``config.seeds.steps > 0``) for the given edges and surface."""
+    centre = views[views.shape[0] // 2, views.shape[1] // 2]
+    seeds = centre_seeds(views, edges, surface, config) if config.seeds.steps else None
+    return centre_disparity(edges, surface, centre, config, seeds)
+
+
 def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
     """Rows ``{stage: {region: MSE×100, "bp07": BadPix(0.07) over all}}`` and label stats."""
     rc, cc = lf.centre_index
@@ -176,7 +190,6 @@ def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
     edges = jax.tree.map(jnp.asarray, base["edges"])
     surface = jax.tree.map(jnp.asarray, base["surface"])
     rcfg = config.reconstruct
-    diffuse = jax.jit(lambda e, s, v: centre_disparity(e, s, v, rcfg))
     maps = {
         "detected": base["centre"],
         "detected +sharpen": base["sharp"],
@@ -189,7 +202,7 @@ def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
         "GT labels": (gt_labels, surface),
         "oracle": (o_edges, o_surface),
     }.items():
-        c = np.asarray(diffuse(e, s, jnp.asarray(img)))
+        c = np.asarray(diffuse_centre(views, e, s, rcfg))
         maps[label] = c
         maps[f"{label} +sharpen"] = np.asarray(sharpen(views, c, rcfg))
     rows = {}

@@ -66,12 +66,16 @@ from mvedge_jax.pipeline import (  # noqa: E402
     with_values,
     write_outputs,
 )
-from mvedge_jax.reconstruct import ReconstructConfig, centre_disparity, sharpen  # noqa: E402
+from mvedge_jax.reconstruct import ReconstructConfig, sharpen  # noqa: E402
 from mvedge_jax.synthetic import VARIANTS, default_light_field  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from error_split import SCENES as VALIDATION_SCENES  # noqa: E402
-from error_split import load_scene, run_pipeline  # noqa: E402
+from error_split import (  # noqa: E402
+    diffuse_centre,
+    load_scene,
+    run_pipeline,
+)
 
 DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 GT_SCENES = ["hci4d/stratified/backgammon", "hci4d/additional/antinous", "hci_old/stillLife_lf_3x3"]
@@ -138,12 +142,6 @@ def run_scene(lf, out_root: str | None, config: PipelineConfig | None = None) ->
     return metrics
 
 
-@eqx.filter_jit
-def _diffuse(views, edges, surface, config):
-    centre = views[views.shape[0] // 2, views.shape[1] // 2]
-    return centre_disparity(edges, surface, centre, config)
-
-
 def _score_scenes(configs: dict, cache: Path | None) -> dict:
     """``{scene: {label: (MSE×100, BadPix(0.07))}}`` of the sharpened centre view (compiled
     once per scene: only array leaves of the configs differ)."""
@@ -159,11 +157,17 @@ def _score_scenes(configs: dict, cache: Path | None) -> dict:
         diffused = {}
         t0 = time.perf_counter()
         for label, cfg in configs.items():
-            # The centre diffusion (eq 6.1) reads the array fields of ``cfg.centre``; the other
+            # The centre diffusion (eq 6.1) reads ``cfg.centre`` and ``cfg.seeds``; the other
             # swept fields act in the sharpening only, so one diffusion serves all of them.
-            key = tuple(float(v) for v in jax.tree.leaves(cfg.centre))
+            key = (cfg.centre, cfg.seeds)
+            key = tuple(float(v) for v in jax.tree.leaves(key)) + (
+                cfg.seeds.steps,
+                cfg.seeds.scale,
+                cfg.seeds.aggregate,
+                cfg.seeds.min_distance,
+            )
             if key not in diffused:
-                diffused[key] = _diffuse(lf.views, edges, surface, cfg)
+                diffused[key] = diffuse_centre(lf.views, edges, surface, cfg)
             m = depth_metrics(np.asarray(sharpen(lf.views, diffused[key], cfg)), gt)
             out[name][label] = (m["mse_x100"], m["badpix_0.07"])
         print(f"  {name}: {len(configs)} configs in {time.perf_counter() - t0:.1f} s", flush=True)

@@ -6,6 +6,7 @@ from ._config import CentreConfig as CentreConfig
 from ._config import EpiConfig as EpiConfig
 from ._config import FillConfig as FillConfig
 from ._config import ReconstructConfig as ReconstructConfig
+from ._config import SeedConfig as SeedConfig
 from ._config import SelectConfig as SelectConfig
 from ._config import SharpenConfig as SharpenConfig
 from ._crosshair import inpaint_epis as inpaint_epis
@@ -18,10 +19,12 @@ from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges
 from ._photo import photo_cost as photo_cost
 from ._photo import photo_refine as photo_refine
+from ._photo import photo_seeds as photo_seeds
 from ._photo import photo_select as photo_select
 from ._photo import photo_sweep as photo_sweep
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
+from ._reconstruct import centre_seeds as centre_seeds
 from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
 from ._reconstruct import select_centre as select_centre

@@ -112,8 +112,10 @@ def centre_problem(
     surface: SurfaceResult,
     centre_view: Float[Array, "H W 3"],
     config: ReconstructConfig,
+    seeds: tuple[Array, Array] | None = None,
 ):
-    """The arrays of the centre-view problem (eq 6.1) on the solve grid.
+    """The arrays of the centre-view problem (eq 6.1) on the solve grid (``seeds``: as
+    `centre_disparity`).
 
     Returns:
         ``(data_weight, target, weight_x, weight_y)`` on the ``upsample×`` grid.
@@ -133,13 +135,24 @@ def centre_problem(
         qx = 2.0 * qx + 0.5
         qy = 2.0 * qy + 0.5
     lam, target = splat_bilinear(qx, qy, edges.disparity, w, (k * H, k * W))
+    if seeds is not None:
+        seed_weight, seed_value = (jnp.asarray(a, lam.dtype) for a in seeds)
+        if k == 2:
+            seed_weight = jnp.repeat(jnp.repeat(seed_weight, 2, axis=0), 2, axis=1)
+            seed_value = jnp.repeat(jnp.repeat(seed_value, 2, axis=0), 2, axis=1)
+        total = lam + seed_weight
+        pos = total > 0
+        target = jnp.where(
+            pos, (lam * target + seed_weight * seed_value) / jnp.where(pos, total, 1.0), 0.0
+        )
+        lam = total
     wx, wy = smoothness_weights(
         guide, conf, config.centre.c, config.centre.eps, config.centre.conf_beta
     )
     return lam, target, wx, wy
 
 
-def _check_inputs(edges: EdgeSet, surface, centre_view) -> tuple[int, int]:
+def _check_inputs(edges: EdgeSet, surface, centre_view, seeds=None) -> tuple[int, int]:
     centre_view = jnp.asarray(centre_view)
     if centre_view.ndim != 3 or centre_view.shape[-1] != 3:
         raise ValueError(f"centre_view must have shape (H, W, 3); got {tuple(centre_view.shape)}")
@@ -159,6 +172,12 @@ def _check_inputs(edges: EdgeSet, surface, centre_view) -> tuple[int, int]:
             f"surface.depth_edge_confidence must have shape {(H, W)}; "
             f"got {tuple(surface.depth_edge_confidence.shape)}"
         )
+    if seeds is not None:
+        if len(seeds) != 2 or any(tuple(jnp.shape(a)) != (H, W) for a in seeds):
+            raise ValueError(
+                f"seeds must be (weight, value), each of shape {(H, W)}; "
+                f"got shapes {[tuple(jnp.shape(a)) for a in seeds]}"
+            )
     return H, W
 
 
@@ -167,6 +186,7 @@ def centre_disparity(
     surface: SurfaceResult,
     centre_view: Float[ArrayLike, "H W 3"],
     config: ReconstructConfig = ReconstructConfig(),
+    seeds: tuple[Float[ArrayLike, "H W"], Float[ArrayLike, "H W"]] | None = None,
 ) -> Float[Array, "H W"]:
     """Dense centre-view disparity by edge-aware diffusion of the edge labels (eq 6.1).
 
@@ -178,6 +198,8 @@ def centre_disparity(
     (``conf`` the depth-edge confidence map of Sec. 4.3). The screened-Poisson problem is solved
     with `solve_poisson` (PCG to ``config.centre.solver.rtol``), optionally on a 2× grid and
     averaged back. Pixels in a region with no label at all come out 0 (minimum-norm solution).
+    With ``seeds = (weight, value)`` (e.g. from `centre_seeds`: photo-consistent samples
+    where no edge label is near) each pixel's data term gains ``weight · (D − value)²``.
 
     Differentiable w.r.t. the array leaves of ``config`` (``centre.omega``, ``centre.a``,
     ``centre.c``, …), the edge disparities and the surface's step responses / confidence map
@@ -189,6 +211,8 @@ def centre_disparity(
             ``depth_edge_confidence (H, W)``.
         centre_view: ``(H, W, 3)`` float RGB in [0, 1].
         config: `ReconstructConfig`.
+        seeds: optional ``(weight (H, W), value (H, W))`` extra samples (weight 0: none;
+            value in pixels per view step).
 
     Returns:
         ``(H, W)`` disparity (pixels per view step), float32 (float64 with float64 inputs).
@@ -199,7 +223,7 @@ def centre_disparity(
     References:
         Thesis Sec. 6.1, eqs 6.1–6.3; Sec. 4.2–4.3 (surface vectors, depth-edge confidence).
     """
-    return solve_centre(edges, surface, centre_view, config)[0]
+    return solve_centre(edges, surface, centre_view, config, seeds)[0]
 
 
 def solve_centre(
@@ -207,17 +231,18 @@ def solve_centre(
     surface: SurfaceResult,
     centre_view: Float[ArrayLike, "H W 3"],
     config: ReconstructConfig = ReconstructConfig(),
+    seeds: tuple[Float[ArrayLike, "H W"], Float[ArrayLike, "H W"]] | None = None,
 ) -> tuple[Float[Array, "H W"], SolveResult]:
     """`centre_disparity` and the `SolveResult` of its screened-Poisson solve (on the
     ``centre.upsample``× grid: its ``x`` is not averaged back), for convergence checks.
 
     Args, Raises, References: as `centre_disparity`.
     """
-    _check_inputs(edges, surface, centre_view)
+    _check_inputs(edges, surface, centre_view, seeds)
     centre_view = jnp.asarray(centre_view)
     if not jnp.issubdtype(centre_view.dtype, jnp.floating):
         centre_view = centre_view.astype(jnp.float32)
-    lam, target, wx, wy = centre_problem(edges, surface, centre_view, config)
+    lam, target, wx, wy = centre_problem(edges, surface, centre_view, config, seeds)
     sol = solve_poisson(lam, target, wx, wy, config=config.centre.solver)
     x = sol.x
     if config.centre.upsample == 2:

@@ -1,5 +1,5 @@
 """`ReconstructConfig`: every option of the smooth 4D reconstruction (thesis Ch. 6), one
-sub-config per step: `CentreConfig`, `SharpenConfig`, `SelectConfig`, `EpiConfig`,
+sub-config per step: `CentreConfig`, `SeedConfig`, `SharpenConfig`, `SelectConfig`, `EpiConfig`,
 `FillConfig`."""
 
 from __future__ import annotations
@@ -172,6 +172,53 @@ class SharpenConfig(eqx.Module):
             )
 
 
+class SeedConfig(eqx.Module):
+    """Disparity samples of the centre diffusion where no edge label is near
+    (`ReconstructConfig.seeds`, `centre_seeds`, `photo_seeds`; not in the thesis).
+
+    Attributes:
+        weight: data weight of a sample in the centre diffusion (eq 6.1's data term; an
+            edge label weighs ``centre.omega · exp(a · λ_e)`` ≥ 150).
+        ratio: (threshold) largest best / second-best photo-cost ratio of a sample.
+        min_contrast: (threshold) smallest second-best minus best cost of a sample (colour
+            units, L1 summed over the channels); rejects uniform colour, whose costs are
+            all equal.
+        exclusion: (threshold) half-width around the best hypothesis left out of the
+            second-best cost, pixels per view step.
+        margin: (threshold) the hypotheses span the edge labels' disparity range widened by
+            this on both sides, pixels per view step.
+        steps: (static) number of fronto-parallel hypotheses; 0 turns the samples off.
+        scale: (static) reduction factor of the sweep.
+        aggregate: (static) radius of the colour-weighted cost aggregation at the reduced
+            resolution.
+        min_distance: (static) pixels (chessboard) from the nearest edge label below which
+            no sample is made.
+
+    Raises:
+        TypeError, ValueError: on construction, for a value of the wrong type or out of
+            range, or ``steps`` of 1 or 2.
+
+    References:
+        Thesis Sec. 8.1.1 (future research: adding samples to the edge set); eq 7.15
+        (warping error).
+    """
+
+    weight: Array = hyperparameter(30.0, differentiable=True, lower=0.0)
+    ratio: Array = hyperparameter(0.6, differentiable=False, lower=0.0, upper=1.0)
+    min_contrast: Array = hyperparameter(2e-4, differentiable=False, lower=0.0)
+    exclusion: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
+    margin: Array = hyperparameter(0.25, differentiable=False, lower=0.0)
+    steps: int = static(49, lower=0, upper=401)
+    scale: int = static(2, lower=1, upper=8)
+    aggregate: int = static(3, lower=0, upper=64)
+    min_distance: int = static(10, lower=0, upper=256)
+
+    def __check_init__(self):
+        check_fields(self)
+        if self.steps in (1, 2):
+            raise ValueError(f"SeedConfig.steps must be 0 (off) or >= 3; got {self.steps}")
+
+
 class SelectConfig(eqx.Module):
     """Merge of an optimised centre map by `select_centre` (`ReconstructConfig.select`).
 
@@ -323,6 +370,8 @@ class ReconstructConfig(eqx.Module):
     Attributes:
         colour_space: ``"lab"`` (CIELAB / 100) or ``"rgb"`` guide for the smoothness terms.
         centre: `CentreConfig`: centre-view diffusion (eqs 6.1–6.3).
+        seeds: `SeedConfig`: photo-consistent samples of the centre diffusion where no
+            edge label is near.
         sharpen: `SharpenConfig`: sharpening of the centre map (Sec. 6.1), boundary
             snapping and matting.
         select: `SelectConfig`: merge of an optimised centre map (`select_centre`, Ch. 7).
@@ -341,6 +390,7 @@ class ReconstructConfig(eqx.Module):
 
     colour_space: str = static("lab", choices=COLOUR_SPACES)
     centre: CentreConfig = CentreConfig()
+    seeds: SeedConfig = SeedConfig()
     sharpen: SharpenConfig = SharpenConfig()
     select: SelectConfig = SelectConfig()
     epi: EpiConfig = EpiConfig()

@@ -316,3 +316,122 @@ def photo_sweep(
     moved = disparity + (unit[inner] + 2.0 * vertex / (steps - 1)) * search
     take = (best > 0) & (best < steps - 1) & finite
     return jnp.where(take, moved, disparity)
+
+
+def _area_downsample(img: Array, scale: int) -> Array:
+    """Mean over ``scale × scale`` blocks of the last two spatial axes ``(..., H, W, C)``
+    (the trailing rows and columns that do not fill a block are dropped)."""
+    if scale == 1:
+        return img
+    H, W = img.shape[-3:-1]
+    h, w = H // scale, W // scale
+    img = img[..., : h * scale, : w * scale, :]
+    shape = img.shape[:-3] + (h, scale, w, scale, img.shape[-1])
+    return img.reshape(shape).mean(axis=(-4, -2))
+
+
+def _block_upsample(img: Array, scale: int, shape: tuple[int, int]) -> Array:
+    """Each coarse pixel repeated over its ``scale × scale`` block, edge-padded to ``shape``."""
+    if scale == 1:
+        return img
+    up = jnp.repeat(jnp.repeat(img, scale, axis=0), scale, axis=1)
+    H, W = shape
+    return jnp.pad(up, ((0, H - up.shape[0]), (0, W - up.shape[1])), mode="edge")
+
+
+def photo_seeds(
+    reference: Float[Array, "H W C"],
+    views: Float[Array, "K H W C"],
+    offsets: Float[Array, "K 2"],
+    support: Bool[Array, "H W"],
+    low: float | Array,
+    high: float | Array,
+    *,
+    steps: int = 49,
+    scale: int = 2,
+    aggregate: int = 3,
+    min_distance: int = 10,
+    exclusion: float | Array = 0.8,
+    ratio: float | Array = 0.6,
+    min_contrast: float | Array = 2e-4,
+    sigma: float | Array = 0.1,
+) -> tuple[Float[Array, "H W"], Bool[Array, "H W"]]:
+    """Disparity samples from a global plane sweep where no edge label is near.
+
+    The edge labels are sparse: a surface without detected edges (a faint floor, a wall)
+    only gets the values diffused from its border, which for a slanted surface are wrong
+    far from it. Here the reference and the views are reduced by ``scale`` (block means) and
+    every pixel is tested at ``steps`` fronto-parallel hypotheses evenly spaced in
+    ``[low, high]`` (pixels per view step at full resolution) with the occlusion-aware,
+    colour-weighted `photo_cost`. A pixel gets a sample where it is more than
+    ``min_distance`` pixels (chessboard) from every pixel of ``support`` and its best
+    hypothesis is distinct: the lowest cost among the hypotheses more than ``exclusion``
+    away from the best is at least ``1 / ratio`` times the best cost and exceeds it by more
+    than ``min_contrast`` (colour units). A flat cost (uniform colour) or a repeated
+    pattern (two minima) gives no sample. The value is the vertex of the parabola through
+    the best hypothesis and its neighbours. Not in the thesis (Sec. 8.1.1 names adding
+    samples to the edge set as future research); used as an extra data term of the centre diffusion
+    (`centre_seeds`, `centre_disparity`'s ``seeds``). The choice of hypothesis is piecewise
+    constant; within it the value is differentiable in the colours.
+
+    Args:
+        reference: ``(H, W, C)`` colour of the reference view in [0, 1].
+        views: ``(K, H, W, C)`` other views.
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each view relative to the reference (view steps).
+        support: ``(H, W)`` bool, pixels that carry an edge label.
+        low, high: range of the hypotheses, pixels per view step.
+        steps: number of hypotheses (≥ 3).
+        scale: reduction factor of the sweep (1: full resolution).
+        aggregate: radius of the colour-weighted cost aggregation at the reduced resolution.
+        min_distance: distance from ``support`` below which no sample is made, pixels.
+        exclusion: half-width around the best hypothesis left out of the second-best cost,
+            pixels per view step.
+        ratio: largest best / second-best cost ratio of a sample.
+        min_contrast: smallest second-best minus best cost of a sample.
+        sigma: colour scale of the aggregation weights.
+
+    Returns:
+        ``(value (H, W), valid (H, W) bool)``: the sample disparity (pixels per view step)
+        and where there is a sample.
+
+    Raises:
+        ValueError: if ``steps < 3`` or ``scale < 1``.
+
+    References:
+        Thesis eq 7.15 (warping error), Sec. 8.1.1 (adding samples).
+    """
+    if not isinstance(steps, int) or steps < 3:
+        raise ValueError(f"steps must be an integer >= 3; got {steps!r}")
+    if not isinstance(scale, int) or scale < 1:
+        raise ValueError(f"scale must be an integer >= 1; got {scale!r}")
+    H, W = reference.shape[:2]
+    dt = jnp.result_type(reference, jnp.float32)
+    ref = _area_downsample(reference, scale)
+    planes = jnp.moveaxis(_area_downsample(views, scale), -1, -3)
+    h, w = ref.shape[:2]
+    hyps = jnp.linspace(jnp.asarray(low, dt), jnp.asarray(high, dt), steps)
+    costs = lax.map(
+        lambda d: _photo_cost_planar(
+            jnp.full((h, w), d / scale, dt), ref, planes, offsets, aggregate, sigma
+        ),
+        hyps,
+    )  # (steps, h, w)
+    best = jnp.argmin(costs, axis=0)
+    c1 = jnp.min(costs, axis=0)
+    step = hyps[1] - hyps[0]
+    far = jnp.abs(hyps[:, None, None] - hyps[best][None]) > exclusion + 0.5 * step
+    c2 = jnp.min(jnp.where(far, costs, jnp.inf), axis=0)
+    distinct = jnp.isfinite(c1) & jnp.isfinite(c2) & (c1 < ratio * c2) & (c2 - c1 > min_contrast)
+    inner = jnp.clip(best, 1, steps - 2)
+    a, b, c = (jnp.take_along_axis(costs, (inner + k)[None], 0)[0] for k in (-1, 0, 1))
+    curvature = a - 2.0 * b + c
+    ok = jnp.isfinite(a) & jnp.isfinite(c) & (curvature > 0)
+    vertex = jnp.clip(jnp.where(ok, 0.5 * (a - c) / jnp.where(ok, curvature, 1.0), 0.0), -0.5, 0.5)
+    value = hyps[inner] + vertex * step
+    value = _block_upsample(value, scale, (H, W))
+    distinct = _block_upsample(distinct, scale, (H, W))
+    k = 2 * min_distance + 1
+    near = lax.reduce_window(
+        jnp.pad(support, min_distance), False, lax.bitwise_or, (k, k), (1, 1), "VALID"
+    )
+    return value, distinct & ~near

@@ -15,7 +15,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from ..edges import EdgeSet
 from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
-from ._centre import _check_inputs, colour_guide, solve_centre
+from ._centre import _check_inputs, colour_guide, solve_centre, splat_bilinear
 from ._config import ReconstructConfig
 from ._crosshair import (
     edge_lines,
@@ -25,7 +25,7 @@ from ._crosshair import (
     solve_epis,
 )
 from ._matte import boundary_matte
-from ._photo import photo_refine, photo_select, photo_sweep
+from ._photo import photo_refine, photo_seeds, photo_select, photo_sweep
 from ._wmf import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -346,6 +346,79 @@ def sharpen(
     return _sharpen(views, centre, config)
 
 
+def _centre_seeds(views: Array, edges: EdgeSet, surface, config: ReconstructConfig):
+    """`centre_seeds` on checked, floating views (traced inline)."""
+    U, V, H, W = views.shape[:4]
+    rc, cc = U // 2, V // 2
+    sd = config.seeds
+    use = edges.valid & edges.visible
+    off = jnp.asarray(surface.offset)
+    qx = edges.x + config.centre.offset_scale * off[:, 0]
+    qy = edges.y + config.centre.offset_scale * off[:, 1]
+    support = splat_bilinear(qx, qy, edges.disparity, use.astype(views.dtype), (H, W))[0] > 0
+    any_label = jnp.any(use)
+    low = jnp.where(any_label, jnp.min(jnp.where(use, edges.disparity, jnp.inf)), 0.0)
+    high = jnp.where(any_label, jnp.max(jnp.where(use, edges.disparity, -jnp.inf)), 0.0)
+    pos = _sweep_positions(U, V, 1)
+    value, valid = photo_seeds(
+        views[rc, cc],
+        views[pos[:, 0], pos[:, 1]],
+        jnp.asarray(pos - np.array([rc, cc]), views.dtype),
+        support,
+        low - sd.margin,
+        high + sd.margin,
+        steps=sd.steps,
+        scale=sd.scale,
+        aggregate=sd.aggregate,
+        min_distance=sd.min_distance,
+        exclusion=sd.exclusion,
+        ratio=sd.ratio,
+        min_contrast=sd.min_contrast,
+    )
+    return jnp.where(valid, sd.weight, 0.0).astype(views.dtype), value.astype(views.dtype)
+
+
+@eqx.filter_jit
+def centre_seeds(
+    views: Float[ArrayLike, "U V H W 3"],
+    edges: EdgeSet,
+    surface: SurfaceResult,
+    config: ReconstructConfig = ReconstructConfig(),
+) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
+    """Photo-consistent disparity samples of the centre view where no edge label is near.
+
+    `photo_seeds` of the centre view against the other views of the central cross-hair,
+    with the hypotheses spanning the disparity range of the edge labels visible in the
+    centre view widened by ``config.seeds.margin``; ``support`` are the pixels the labels
+    are splatted onto (at ``p + centre.offset_scale · n``, as in `centre_disparity`). The
+    result is `centre_disparity`'s ``seeds`` argument; `reconstruct` adds it with
+    ``config.seeds.steps > 0``. Differentiable in ``config.seeds.weight`` and, within
+    the hypothesis choice, in the colours. jit-compiled (`equinox.filter_jit`).
+
+    Args:
+        views: ``(U, V, H, W, 3)`` float RGB in [0, 1], ``U, V >= 3``.
+        edges: `EdgeSet` (capacity ``N``; centre-view positions, disparities, ``visible``).
+        surface: `SurfaceResult` (``offset (N, 2)``).
+        config: `ReconstructConfig` (its ``seeds`` sub-config; ``seeds.steps`` ≥ 3).
+
+    Returns:
+        ``(weight (H, W), value (H, W))``: ``config.seeds.weight`` where a pixel has a
+        sample and 0 elsewhere, and the sample disparity (pixels per view step).
+
+    Raises:
+        ValueError: on inconsistent shapes (quoted), or ``config.seeds.steps == 0``.
+
+    References:
+        Thesis eq 7.15 (warping error), Sec. 8.1.1 (adding samples); not in the thesis.
+    """
+    views = jnp.asarray(views, jnp.result_type(views, jnp.float32))
+    U, V, H, W = _check_views(views)
+    _check_inputs(edges, surface, views[U // 2, V // 2])
+    if config.seeds.steps == 0:
+        raise ValueError("config.seeds.steps is 0 (samples off); set it to >= 3")
+    return _centre_seeds(views, edges, surface, config)
+
+
 @eqx.filter_jit
 def select_centre(
     views: Float[ArrayLike, "U V H W 3"],
@@ -570,7 +643,9 @@ def reconstruct(
 ) -> Reconstruction:
     """Smooth, view-consistent disparity for every view of a light field (thesis Ch. 6).
 
-    1. Centre view: `centre_disparity` (eq 6.1–6.3).
+    1. Centre view: `centre_disparity` (eq 6.1–6.3), with the photo-consistent samples of
+       `centre_seeds` where no edge label is near (``config.seeds.steps > 0``; not in the
+       thesis).
     2. Sharpening: pixels next to depth discontinuities are snapped to the photo-consistent
        side with the cross-hair views (`photo_refine`, ``config.sharpen.refine``; not in the
        thesis: it removes the foreground halos that labels on the wrong side of an occlusion
@@ -620,7 +695,8 @@ def reconstruct(
     centre_view = views[U // 2, V // 2]
     _check_inputs(edges, surface, centre_view)
 
-    centre, centre_solve = solve_centre(edges, surface, centre_view, config)
+    seeds = _centre_seeds(views, edges, surface, config) if config.seeds.steps else None
+    centre, centre_solve = solve_centre(edges, surface, centre_view, config, seeds)
     sharp = _sharpen(views, centre, config)
     disparity, cross_h, cross_v, residual = _propagate(views, sharp, edges, surface, config)
     return Reconstruction(

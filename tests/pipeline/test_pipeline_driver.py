@@ -10,6 +10,7 @@ from mvedge_jax.cli import main
 from mvedge_jax.io import load_light_field
 from mvedge_jax.metrics import depth_metrics
 from mvedge_jax.pipeline import PipelineConfig, config_from_dict, estimate_disparity
+from mvedge_jax.reconstruct import centre_seeds
 from mvedge_jax.synthetic import default_light_field
 
 METRIC_KEYS = {
@@ -148,11 +149,26 @@ def test_backgammon_accuracy(data_dir):
 
 def test_antinous_accuracy(data_dir):
     """Regression bound on the sparsely textured GT scene (its wall has few edge points; an
-    over-eager outlier test once raised MSE×100 to 124). Measured 2026-11-23 (first-order
-    weighted median): 7.94 / 15.5% (issue targets 10 and 18%)."""
+    over-eager outlier test once raised MSE×100 to 124). The floor below the wall (rows
+    455–511 left and right of the statue's base) has no edge label; its disparity rises
+    from −1.5 to 1.7 px per view step towards the bottom, and only the photo-consistent
+    samples of `centre_seeds` tell the diffusion so. Measured 2026-11-23: MSE×100 5.59,
+    BadPix(0.07) 12.6 % (7.79 / 12.8 % without the samples); floor MSE×100 35.7 (81.8
+    without); 3699 sampled pixels, on the floor median error 0.09 and 9 % above 0.3."""
     lf = load_light_field(data_dir / "hci4d" / "additional" / "antinous")
     res = estimate_disparity(lf)
     rc, cc = lf.centre_index
-    m = depth_metrics(np.asarray(res.disparity[rc, cc]), np.asarray(lf.centre_gt))
-    assert m["badpix_0.07"] < 18.0, m
-    assert m["mse_x100"] < 10.0, m
+    gt = np.asarray(lf.centre_gt)
+    d = np.asarray(res.disparity[rc, cc])
+    m = depth_metrics(d, gt)
+    assert m["badpix_0.07"] < 14.0, m
+    assert m["mse_x100"] < 6.5, m
+    floor = np.zeros(gt.shape, bool)
+    floor[455:, :110] = True
+    floor[455:, 410:] = True
+    assert 100 * np.mean((d - gt)[floor] ** 2) < 50.0
+    weight, value = (np.asarray(a) for a in centre_seeds(lf.views, res.edges, res.surface))
+    sampled = weight > 0
+    assert 1000 < sampled.sum() < 20000, sampled.sum()
+    err = np.abs(value - gt)[floor & sampled]
+    assert np.median(err) < 0.15 and np.mean(err > 0.3) < 0.15, (np.median(err), err.mean())

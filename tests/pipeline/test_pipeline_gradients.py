@@ -37,7 +37,8 @@ RTOL = 1e-3
 
 def _tight(config: PipelineConfig) -> PipelineConfig:
     """Solvers to a 1e-12 residual; a test point where every field acts smoothly (anti-aliased
-    bank, λ_e clipped for some points, splat offsets off the pixel grid)."""
+    bank, λ_e clipped for some points, splat offsets off the pixel grid, photo-consistent
+    samples of the centre diffusion close enough to the labels to exist in a 32² view)."""
     tight = SolverConfig(rtol=1e-12, max_iters=5000)
     tight_j = SolverConfig(preconditioner="jacobi", rtol=1e-12, max_iters=20000)
     return with_values(
@@ -48,6 +49,7 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
             "reconstruct.centre.lambda_e_max": 0.2,
             "reconstruct.centre.offset_scale": 0.93,
             "reconstruct.centre.solver": tight,
+            "reconstruct.seeds.min_distance": 2,
             "reconstruct.epi.solver": tight_j,
             "reconstruct.fill.solver": tight_j,
         },
