@@ -185,7 +185,7 @@ class SeedConfig(eqx.Module):
             all equal.
         exclusion: (threshold) half-width around the best hypothesis left out of the
             second-best cost, pixels per view step.
-        margin: (threshold) the hypotheses span the edge labels' disparity range widened by
+        margin: the hypotheses span the edge labels' disparity range widened by
             this on both sides, pixels per view step.
         steps: (static) number of fronto-parallel hypotheses; 0 turns the samples off.
         scale: (static) reduction factor of the sweep.
@@ -207,7 +207,7 @@ class SeedConfig(eqx.Module):
     ratio: Array = hyperparameter(0.6, differentiable=False, lower=0.0, upper=1.0)
     min_contrast: Array = hyperparameter(2e-4, differentiable=False, lower=0.0)
     exclusion: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
-    margin: Array = hyperparameter(0.25, differentiable=False, lower=0.0)
+    margin: Array = hyperparameter(0.25, differentiable=True, lower=0.0)
     steps: int = static(49, lower=0, upper=401)
     scale: int = static(2, lower=1, upper=8)
     aggregate: int = static(3, lower=0, upper=64)

@@ -109,13 +109,14 @@ def test_residual_diffusion_starts_from_the_initial_map(api_run):
 
 
 def test_optimize_decreases_the_loss_and_stays_accurate(api_run):
-    """Measured on this scene (session 5, residual diffusion): loss 0.0190 → 0.0184 in 12
-    steps; centre MSE×100 1.38 (Ch. 6) → 1.17, BadPix(0.07) 12.7 → 12.0; every view ≤ 2.4
-    (Ch. 6: ≤ 2.3). Bounds are regression guards."""
+    """Measured on this scene (2026-11-23, 3 steps of ``TINY``): loss 0.01833 → 0.01807
+    (×0.986; ×0.985 without the photo-consistent samples of the centre diffusion, which
+    touch 311 pixels here); centre MSE×100 1.232 (Ch. 6) → 1.172. Bounds are regression
+    guards."""
     lf, res, new, info, _ = api_run
     loss = np.asarray(info["loss_history"])
     assert loss[-1] < loss[0]
-    assert loss[-1] < 0.985 * loss[0]
+    assert loss[-1] < 0.99 * loss[0]
     gt = np.asarray(lf.gt_disparity)
     U, V = lf.grid
     mse = [
