@@ -107,6 +107,18 @@ def _downsample2(img: Array) -> Array:
     return img.reshape(H2 // 2, 2, W2 // 2, 2).mean(axis=(1, 3))
 
 
+def label_positions(
+    edges: EdgeSet, surface: SurfaceResult, config: ReconstructConfig
+) -> tuple[Array, Array, Array]:
+    """``(qx, qy, use)``: where each edge label enters the centre diffusion,
+    ``p + centre.offset_scale · n`` (``n`` its surface vector; pixels), and which labels do
+    (valid and visible in the centre view)."""
+    off = jnp.asarray(surface.offset)
+    qx = edges.x + config.centre.offset_scale * off[:, 0]
+    qy = edges.y + config.centre.offset_scale * off[:, 1]
+    return qx, qy, edges.valid & edges.visible
+
+
 def centre_problem(
     edges: EdgeSet,
     surface: SurfaceResult,
@@ -122,10 +134,7 @@ def centre_problem(
     """
     H, W = centre_view.shape[:2]
     k = config.centre.upsample
-    use = edges.valid & edges.visible
-    off = jnp.asarray(surface.offset)
-    qx = edges.x + config.centre.offset_scale * off[:, 0]
-    qy = edges.y + config.centre.offset_scale * off[:, 1]
+    qx, qy, use = label_positions(edges, surface, config)
     w = jnp.where(use, edge_data_weight(jnp.asarray(surface.step_response), config), 0.0)
     guide = colour_guide(centre_view, config.colour_space)
     conf = jnp.asarray(surface.depth_edge_confidence)

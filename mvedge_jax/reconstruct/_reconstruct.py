@@ -15,7 +15,13 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from ..edges import EdgeSet
 from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
-from ._centre import _check_inputs, colour_guide, solve_centre, splat_bilinear
+from ._centre import (
+    _check_inputs,
+    colour_guide,
+    label_positions,
+    solve_centre,
+    splat_bilinear,
+)
 from ._config import ReconstructConfig
 from ._crosshair import (
     edge_lines,
@@ -351,10 +357,7 @@ def _centre_seeds(views: Array, edges: EdgeSet, surface, config: ReconstructConf
     U, V, H, W = views.shape[:4]
     rc, cc = U // 2, V // 2
     sd = config.seeds
-    use = edges.valid & edges.visible
-    off = jnp.asarray(surface.offset)
-    qx = edges.x + config.centre.offset_scale * off[:, 0]
-    qy = edges.y + config.centre.offset_scale * off[:, 1]
+    qx, qy, use = label_positions(edges, surface, config)
     support = splat_bilinear(qx, qy, edges.disparity, use.astype(views.dtype), (H, W))[0] > 0
     any_label = jnp.any(use)
     low = jnp.where(any_label, jnp.min(jnp.where(use, edges.disparity, jnp.inf)), 0.0)

@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from reconstruct_helpers import cross_hair, interior
 from scipy.ndimage import grey_dilation
 
 from mvedge_jax.io import load_light_field
@@ -22,18 +23,9 @@ from mvedge_jax.reconstruct import (
 )
 
 
-def _cross(lf):
-    U, V = lf.grid
-    rc, cc = U // 2, V // 2
-    pos = [(rc, c) for c in range(V) if c != cc] + [(r, cc) for r in range(U) if r != rc]
-    views = jnp.stack([lf.views[r, c] for r, c in pos])
-    offsets = jnp.asarray([(r - rc, c - cc) for r, c in pos], jnp.float32)
-    return views, offsets
-
-
 def test_photo_cost_is_lowest_at_the_truth(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = lf.centre_gt
     costs = [
         float(jnp.mean(photo_cost(gt + delta, lf.centre_view, views, offsets)))
@@ -44,7 +36,7 @@ def test_photo_cost_is_lowest_at_the_truth(small_scene):
 
 def test_photo_refine_removes_a_foreground_halo(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = np.asarray(lf.centre_gt)
     halo = grey_dilation(gt, size=(5, 5))  # foreground fattened by 2 px (edge fattening)
     f = jax.jit(
@@ -65,7 +57,7 @@ def test_photo_select_takes_the_better_map_and_keeps_fine_values(small_scene):
     """A candidate that fixes a fattened boundary but is noisy at the 0.01 level elsewhere:
     the merge takes its boundary fix and keeps the incumbent's fine values."""
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = np.asarray(lf.centre_gt)
     halo = grey_dilation(gt, size=(5, 5))  # incumbent: exact except a 2 px foreground halo
     rng = np.random.default_rng(0)
@@ -86,7 +78,7 @@ def test_photo_select_takes_the_better_map_and_keeps_fine_values(small_scene):
 
 def test_photo_select_keeps_a_correct_incumbent(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = np.asarray(lf.centre_gt)
     halo = grey_dilation(gt, size=(5, 5))
     out, took = photo_select(jnp.asarray(gt), jnp.asarray(halo), lf.centre_view, views, offsets)
@@ -97,7 +89,7 @@ def test_photo_select_keeps_a_correct_incumbent(small_scene):
 
 def test_photo_select_bad_input(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = lf.centre_gt
     with pytest.raises(ValueError, match="same shape"):
         photo_select(gt, gt[:-1], lf.centre_view, views, offsets)
@@ -105,7 +97,7 @@ def test_photo_select_bad_input(small_scene):
 
 def test_select_centre_matches_photo_select_with_the_cross_hair(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = jnp.asarray(lf.centre_gt)
     halo = jnp.asarray(grey_dilation(np.asarray(gt), size=(5, 5)))
     cfg = ReconstructConfig(select=SelectConfig(min_change=0.05, aggregate=2))
@@ -127,7 +119,7 @@ def test_select_centre_matches_photo_select_with_the_cross_hair(small_scene):
 
 def test_photo_cost_ssim_term(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     ref = lf.centre_view
     d = lf.centre_gt + 0.2
     plain = np.asarray(photo_cost(d, ref, views, offsets))
@@ -180,22 +172,16 @@ def test_ssim_tells_disparities_apart_on_faint_real_texture(data_dir):
     assert min(wins[1.0]) > 0.6, wins
 
 
-def _interior(gt, size=9, jump=0.05):
-    """Pixels whose ``size²`` window spans less than ``jump`` of GT disparity."""
-    g = np.asarray(gt)
-    return grey_dilation(g, size=(size, size)) + grey_dilation(-g, size=(size, size)) < jump
-
-
 def test_photo_sweep_corrects_a_small_offset(small_scene):
     """A map off by 0.06 px per view step everywhere: inside the surfaces the sweep brings it
     closer to the truth (parabola vertex between hypotheses 0.1 apart). Measured: median
     error 0.016, 18 % of the pixels above 0.04, none above the input's 0.06 but 1 %."""
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     gt = np.asarray(lf.centre_gt)
     f = jax.jit(lambda d: photo_sweep(d, lf.centre_view, views, offsets, steps=5, search=0.2))
     out = np.asarray(f(jnp.asarray(gt + 0.06)))
-    inside = _interior(gt)
+    inside = interior(gt)
     assert inside.mean() > 0.4
     err = np.abs(out - gt)[inside]
     assert np.median(err) < 0.02 and np.mean(err > 0.065) < 0.05, (np.median(err), err.mean())
@@ -206,10 +192,10 @@ def test_photo_sweep_keeps_the_value_when_the_optimum_is_out_of_range(small_scen
     """0.5 off with ``search = 0.1``: the cost falls towards the end of the range, so the
     pixels keep their value."""
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     d = np.asarray(lf.centre_gt) - 0.5
     out = np.asarray(photo_sweep(jnp.asarray(d), lf.centre_view, views, offsets, search=0.1))
-    inside = _interior(lf.centre_gt)
+    inside = interior(lf.centre_gt)
     assert np.mean(out[inside] == d[inside]) > 0.9
     assert np.all(np.abs(out - d) <= 0.1 + 1e-5)
 
@@ -221,7 +207,7 @@ def test_photo_sweep_gradient_matches_finite_differences(small_scene, x64):
     pixels whose choice flips within ±eps are the few that disagree)."""
     lf, _, _ = small_scene
     ref = jnp.asarray(lf.centre_view, jnp.float64)
-    views, offsets = (jnp.asarray(a, jnp.float64) for a in _cross(lf))
+    views, offsets = (jnp.asarray(a, jnp.float64) for a in cross_hair(lf))
     gt = jnp.asarray(lf.centre_gt, jnp.float64)
     d0 = gt + 0.03
     v = jnp.asarray(np.random.default_rng(0).normal(size=gt.shape))
@@ -233,7 +219,7 @@ def test_photo_sweep_gradient_matches_finite_differences(small_scene, x64):
     eps = 1e-6
     fd = (np.asarray(f(d0 + eps * v)) - np.asarray(f(d0 - eps * v))) / (2 * eps)
     tangent = np.asarray(tangent)
-    inside = _interior(gt)
+    inside = interior(gt)
     close = np.abs(fd - tangent) <= 1e-3 * np.abs(tangent) + 1e-3
     assert np.mean(close[inside]) > 0.98, np.mean(close[inside])
     # the vertex term is present: the derivative is not the identity everywhere
@@ -242,7 +228,7 @@ def test_photo_sweep_gradient_matches_finite_differences(small_scene, x64):
 
 def test_photo_sweep_bad_steps(small_scene):
     lf, _, _ = small_scene
-    views, offsets = _cross(lf)
+    views, offsets = cross_hair(lf)
     for steps in (1, 4):
         with pytest.raises(ValueError, match="odd integer"):
             photo_sweep(lf.centre_gt, lf.centre_view, views, offsets, steps=steps)
