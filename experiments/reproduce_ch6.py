@@ -159,13 +159,9 @@ def _score_scenes(configs: dict, cache: Path | None) -> dict:
         for label, cfg in configs.items():
             # The centre diffusion (eq 6.1) reads ``cfg.centre`` and ``cfg.seeds``; the other
             # swept fields act in the sharpening only, so one diffusion serves all of them.
-            key = (cfg.centre, cfg.seeds)
-            key = tuple(float(v) for v in jax.tree.leaves(key)) + (
-                cfg.seeds.steps,
-                cfg.seeds.scale,
-                cfg.seeds.aggregate,
-                cfg.seeds.min_distance,
-            )
+            # Array leaves by value, static fields through the tree structure.
+            part = (cfg.centre, cfg.seeds)
+            key = (jax.tree.structure(part), tuple(float(v) for v in jax.tree.leaves(part)))
             if key not in diffused:
                 diffused[key] = diffuse_centre(lf.views, edges, surface, cfg)
             m = depth_metrics(np.asarray(sharpen(lf.views, diffused[key], cfg)), gt)

@@ -12,6 +12,7 @@ from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab
 from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
+from ._photo import _block_upsample
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..surface import SurfaceResult
@@ -146,9 +147,8 @@ def centre_problem(
     lam, target = splat_bilinear(qx, qy, edges.disparity, w, (k * H, k * W))
     if seeds is not None:
         seed_weight, seed_value = (jnp.asarray(a, lam.dtype) for a in seeds)
-        if k == 2:
-            seed_weight = jnp.repeat(jnp.repeat(seed_weight, 2, axis=0), 2, axis=1)
-            seed_value = jnp.repeat(jnp.repeat(seed_value, 2, axis=0), 2, axis=1)
+        seed_weight = _block_upsample(seed_weight, k, (k * H, k * W))
+        seed_value = _block_upsample(seed_value, k, (k * H, k * W))
         total = lam + seed_weight
         pos = total > 0
         target = jnp.where(

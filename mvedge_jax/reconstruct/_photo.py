@@ -244,6 +244,23 @@ def photo_select(
     return jnp.where(took, candidate, incumbent), took
 
 
+def _parabola_vertex(costs: Array, best: Array) -> tuple[Array, Array, Array]:
+    """Sub-hypothesis refinement of a per-pixel argmin over ``costs (S, H, W)``.
+
+    Returns ``(inner, vertex, finite)``: ``inner = clip(best, 1, S − 2)``; the vertex of the
+    parabola through the costs at ``inner − 1``, ``inner``, ``inner + 1``, in hypothesis
+    steps from ``inner`` and clipped to ±0.5 (0 where the three costs are not finite or not
+    convex); and whether the three costs are finite."""
+    S = costs.shape[0]
+    inner = jnp.clip(best, 1, S - 2)
+    c0, c1, c2 = (jnp.take_along_axis(costs, (inner + k)[None], 0)[0] for k in (-1, 0, 1))
+    curvature = c0 - 2.0 * c1 + c2
+    finite = jnp.isfinite(c0) & jnp.isfinite(c1) & jnp.isfinite(c2)
+    convex = finite & (curvature > 0)
+    vertex = jnp.where(convex, 0.5 * (c0 - c2) / jnp.where(convex, curvature, 1.0), 0.0)
+    return inner, jnp.clip(vertex, -0.5, 0.5), finite
+
+
 def photo_sweep(
     disparity: Float[Array, "H W"],
     reference: Float[Array, "H W C"],
@@ -305,13 +322,7 @@ def photo_sweep(
         unit,
     )  # (steps, H, W)
     best = jnp.argmin(costs, axis=0)
-    inner = jnp.clip(best, 1, steps - 2)
-    c0, c1, c2 = (jnp.take_along_axis(costs, (inner + k)[None], 0)[0] for k in (-1, 0, 1))
-    curvature = c0 - 2.0 * c1 + c2
-    finite = jnp.isfinite(c0) & jnp.isfinite(c1) & jnp.isfinite(c2)
-    convex = finite & (curvature > 0)
-    vertex = jnp.where(convex, 0.5 * (c0 - c2) / jnp.where(convex, curvature, 1.0), 0.0)
-    vertex = jnp.clip(vertex, -0.5, 0.5)
+    inner, vertex, finite = _parabola_vertex(costs, best)
     # Hypotheses are 2 / (steps − 1) apart in units of ``search``.
     moved = disparity + (unit[inner] + 2.0 * vertex / (steps - 1)) * search
     take = (best > 0) & (best < steps - 1) & finite
@@ -422,11 +433,7 @@ def photo_seeds(
     far = jnp.abs(hyps[:, None, None] - hyps[best][None]) > exclusion + 0.5 * step
     c2 = jnp.min(jnp.where(far, costs, jnp.inf), axis=0)
     distinct = jnp.isfinite(c1) & jnp.isfinite(c2) & (c1 < ratio * c2) & (c2 - c1 > min_contrast)
-    inner = jnp.clip(best, 1, steps - 2)
-    a, b, c = (jnp.take_along_axis(costs, (inner + k)[None], 0)[0] for k in (-1, 0, 1))
-    curvature = a - 2.0 * b + c
-    ok = jnp.isfinite(a) & jnp.isfinite(c) & (curvature > 0)
-    vertex = jnp.clip(jnp.where(ok, 0.5 * (a - c) / jnp.where(ok, curvature, 1.0), 0.0), -0.5, 0.5)
+    inner, vertex, _ = _parabola_vertex(costs, best)
     value = hyps[inner] + vertex * step
     value = _block_upsample(value, scale, (H, W))
     distinct = _block_upsample(distinct, scale, (H, W))
