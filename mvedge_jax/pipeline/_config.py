@@ -163,21 +163,30 @@ def with_values(config: PipelineConfig, values: dict) -> PipelineConfig:
 
 def smooth_config(config: PipelineConfig | None = None) -> PipelineConfig:
     """``config`` with the smooth surrogates of its piecewise-constant stages: soft edge
-    labels (``edges.label.strategy = "soft"``) and the weighted mean instead of the weighted
-    median (``reconstruct.sharpen.filter = "mean"``). Use it to differentiate the chain
-    with respect to ``edges.label.temperature`` and ``reconstruct.sharpen.wmf_sigma`` (the
-    chain is piecewise constant in them otherwise), or for gradient-based tuning (`tune`).
+    labels (``edges.label.strategy = "soft"``), the weighted mean instead of the weighted
+    median (``reconstruct.sharpen.filter = "mean"``), and the cross-hair holes without the
+    visibility test (``reconstruct.epi.visibility_fill = False``: the test switches a hole
+    between candidate values, so the all-view loss jumps as the inpainting's fields move).
+    Use it to differentiate the chain with respect to ``edges.label.temperature`` and
+    ``reconstruct.sharpen.wmf_sigma`` (the chain is piecewise constant in them otherwise), or
+    for gradient-based tuning (`tune`).
 
     Args:
         config: the configuration to modify (default `PipelineConfig()`).
 
     Returns:
-        The `PipelineConfig` with ``edges.label.strategy = "soft"`` and
-        ``reconstruct.sharpen.filter = "mean"``, other fields unchanged.
+        The `PipelineConfig` with ``edges.label.strategy = "soft"``,
+        ``reconstruct.sharpen.filter = "mean"`` and ``reconstruct.epi.visibility_fill =
+        False``, other fields unchanged.
     """
     config = PipelineConfig() if config is None else config
     return with_values(
-        config, {"edges.label.strategy": "soft", "reconstruct.sharpen.filter": "mean"}
+        config,
+        {
+            "edges.label.strategy": "soft",
+            "reconstruct.sharpen.filter": "mean",
+            "reconstruct.epi.visibility_fill": False,
+        },
     )
 
 

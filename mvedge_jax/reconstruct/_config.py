@@ -277,6 +277,8 @@ class EpiConfig(eqx.Module):
             is larger (nearer) than the line's by more than this (the line is occluded there).
         c: numerator ``c`` of the EPI smoothness (eq 6.7; thesis 0.1).
         eps: ``ε`` of eq 6.7, guide units.
+        visibility_tol: (threshold) disparity margin of `contradicted_by_centre` in the
+            ``visibility_fill`` test (pixels per view step).
 
     Attributes (static):
         cross_hair_fill: in every cross-hair view but the centre, the holes of the
@@ -285,6 +287,17 @@ class EpiConfig(eqx.Module):
             left, right, above and below). The EPI inpainting sees one image row or column
             only: a disoccluded patch flanked along it by two nearer surfaces gets their
             values there, while the background it belongs to lies beside it in the view.
+        visibility_fill: with ``cross_hair_fill``, a hole that nothing was projected to
+            keeps that value only where the centre view does not contradict it
+            (`contradicted_by_centre`: traced back into the centre view, the value lands in
+            the frame on a surface that is not nearer, so the centre would have projected
+            it here). Otherwise it takes the nearest of three candidates that the centre
+            view does not contradict: the inpainted value, the 2-D `background_fill` of the
+            view, and the farther of the nearest projected values of the same pixel in the
+            cross-hair views before and after it. This mainly fixes the strips along the
+            frame where content from outside the centre view's frame enters a view: there
+            the inpainting and the 2-D fill see only the surface beside the strip, often a
+            nearer one.
         solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
             Jacobi preconditioner is much faster than the batched multigrid).
 
@@ -307,6 +320,8 @@ class EpiConfig(eqx.Module):
     c: Array = hyperparameter(0.1, differentiable=True, lower=0.0)
     eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
     cross_hair_fill: bool = static(True)
+    visibility_fill: bool = static(True)
+    visibility_tol: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
 
     def __check_init__(self):

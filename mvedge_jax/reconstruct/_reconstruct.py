@@ -167,15 +167,87 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     return lax.map(one, (filled, conf, valid, rows, cols))
 
 
-def _cross_hair_fill(maps, valid, conf, centre: int, config: ReconstructConfig):
+def contradicted_by_centre(
+    candidate: Float[Array, "H W"],
+    centre: Float[Array, "H W"],
+    offset: Float[Array, " 2"],
+    tol: float | Array,
+) -> Bool[Array, "H W"]:
+    """Where the centre view's map rules out a disparity for the pixels of another view.
+
+    Each pixel's ``candidate`` is traced back into the centre view, to
+    ``(x + dc d, y + dr d)`` (the inverse of `forward_project`). It is ruled out where that
+    point lies inside the frame and the nearest of the four centre pixels around it is not
+    nearer than ``d + tol``: the centre view would see that surface there and would have
+    projected it to the pixel. A hole of the projection (a disocclusion, or content entering
+    over the frame) can only hold a surface that the centre view does not see at that spot:
+    one hidden behind a nearer surface, or outside its frame.
+
+    Args:
+        candidate: ``(H, W)`` disparity of the view's pixels (pixels per view step).
+        centre: ``(H, W)`` the centre view's disparity map.
+        offset: ``(2,)`` ``(dr, dc)`` of the view relative to the centre view (view steps).
+        tol: disparity margin (pixels per view step).
+
+    Returns:
+        ``(H, W)`` bool.
+
+    References:
+        Not in the thesis; the visibility reasoning of its forward projection (Sec. 6.1,
+        eq 6.5) applied to the holes that the projection leaves.
+    """
+    H, W = candidate.shape
+    ys, xs = jnp.meshgrid(
+        jnp.arange(H, dtype=candidate.dtype), jnp.arange(W, dtype=candidate.dtype), indexing="ij"
+    )
+    yc = ys + offset[0] * candidate
+    xc = xs + offset[1] * candidate
+    inside = (yc >= 0) & (yc <= H - 1) & (xc >= 0) & (xc <= W - 1)
+    y0 = jnp.clip(jnp.floor(yc), 0, H - 1).astype(jnp.int32)
+    x0 = jnp.clip(jnp.floor(xc), 0, W - 1).astype(jnp.int32)
+    y1 = jnp.minimum(y0 + 1, H - 1)
+    x1 = jnp.minimum(x0 + 1, W - 1)
+    # The nearest of the four pixels around the traced point: a boundary between the
+    # centre's surfaces may lie anywhere between them.
+    at = jnp.maximum(
+        jnp.maximum(centre[y0, x0], centre[y0, x1]), jnp.maximum(centre[y1, x0], centre[y1, x1])
+    )
+    return inside & (at <= candidate + tol)
+
+
+def _cross_hair_fill(
+    maps, valid, conf, centre: int, offsets, centre_map, config: ReconstructConfig
+):
     """``config.epi.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
-    projection's ``valid`` and photometric confidence; entry ``centre`` is kept."""
+    projection's ``valid`` and photometric confidence; entry ``centre`` is kept.
+    ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map."""
+    ok = valid & (conf > config.epi.min_confidence)
+    view_bg = jax.vmap(background_fill)(maps, ok)
+    fallback = jnp.where(ok, maps, jnp.minimum(maps, view_bg))
+    if config.epi.visibility_fill:
+        # The farther of the nearest valid values of the same pixel in the views before and
+        # after along the cross-hair (the EPI's angular axis).
+        big = jnp.asarray(jnp.inf, maps.dtype)
+        epi_bg = jnp.full(maps.shape, big)
+        for reverse in (False, True):
+            v, found = _nearest_along(maps, ok, 0, reverse)
+            epi_bg = jnp.minimum(epi_bg, jnp.where(found, v, big))
+        tol = config.epi.visibility_tol
 
-    def one(m, v, c):
-        ok = v & (c > config.epi.min_confidence)
-        return jnp.where(ok, m, jnp.minimum(m, background_fill(m, ok)))
+        def bad(c):
+            return jax.vmap(contradicted_by_centre, (0, None, 0, None))(c, centre_map, offsets, tol)
 
-    return jax.vmap(one)(maps, valid, conf).at[centre].set(maps[centre])
+        old = jnp.minimum(maps, view_bg)
+        epi_bg = jnp.where(jnp.isfinite(epi_bg), epi_bg, old)
+        # Keep the farther of inpainted value and view background unless the centre view
+        # contradicts it; else the nearest of inpainted value, view background and angular
+        # background that the centre view does not contradict.
+        cands = jnp.stack([maps, view_bg, epi_bg])
+        allowed = ~jax.vmap(bad)(cands)
+        best = jnp.max(jnp.where(allowed, cands, -jnp.inf), axis=0)
+        chosen = jnp.where(bad(old) & jnp.any(allowed, axis=0), best, old)
+        fallback = jnp.where(ok, maps, jnp.where(valid, fallback, chosen))
+    return fallback.at[centre].set(maps[centre])
 
 
 def _cross_hair_positions(U: int, V: int) -> np.ndarray:
@@ -528,8 +600,8 @@ def _propagate(
     cross_h = jnp.transpose(eh.x, (1, 0, 2))  # (V, H, W)
     cross_v = jnp.transpose(ev.x, (1, 2, 0))  # (U, H, W)
     if config.epi.cross_hair_fill:
-        cross_h = _cross_hair_fill(cross_h, vh, ch, cc, config)
-        cross_v = _cross_hair_fill(cross_v, vv, cv, rc, config)
+        cross_h = _cross_hair_fill(cross_h, vh, ch, cc, off_h, centre, config)
+        cross_v = _cross_hair_fill(cross_v, vv, cv, rc, off_v, centre, config)
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
     disparity = jnp.zeros((U, V, H, W), cross_h.dtype)
     disparity = disparity.at[rc, :].set(cross_h)

@@ -11,6 +11,7 @@ from mvedge_jax.pipeline import (
     config_to_toml,
     estimate_disparity,
     get_path,
+    smooth_config,
     tune,
 )
 from mvedge_jax.synthetic import make_scene
@@ -23,7 +24,8 @@ def scenes():
 
 
 def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
-    config = PipelineConfig()
+    # `smooth_config`: the configuration `tune` is documented for (no hard selections).
+    config = smooth_config()
     fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
     seen = []
     tuned, hist = tune(

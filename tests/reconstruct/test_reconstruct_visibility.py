@@ -1,0 +1,71 @@
+"""Visibility test of the cross-hair hole fill (`contradicted_by_centre`,
+``EpiConfig.visibility_fill``)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from mvedge_jax.reconstruct import (
+    EpiConfig,
+    ReconstructConfig,
+    contradicted_by_centre,
+    project_cross_hair,
+)
+from mvedge_jax.reconstruct._reconstruct import _cross_hair_fill
+
+
+def test_contradicted_by_centre_hand_computed():
+    """Centre: background 0, a foreground column block of disparity 1 at x >= 4. View two
+    steps to the right (dc = 2): a value traced to ``x + 2 d``."""
+    centre = jnp.zeros((3, 8)).at[:, 4:].set(1.0)
+    off = jnp.array([0.0, 2.0])
+
+    def at(x, d):
+        cand = jnp.zeros((3, 8)).at[1, x].set(d)
+        return bool(contradicted_by_centre(cand, centre, off, 0.2)[1, x])
+
+    assert at(1, 0.0)  # traced to x = 1: the centre sees background there
+    assert not at(1, -1.0)  # traced to x = -1: outside the centre's frame
+    assert not at(2, 0.75)  # x = 3.5: pixel 4 (disparity 1 > 0.95) may hide it
+    assert at(2, 0.25)  # x = 2.5: pixels 2 and 3 both show disparity 0 <= 0.45
+    assert not at(3, 0.0)  # x = 3 exactly: pixel 4 is nearer
+    assert at(1, 1.0)  # x = 3: the centre sees background, not a surface at 1...
+    assert at(2, 1.0)  # x = 4: ...and sees this foreground itself: it would have landed
+    # The vertical offset traces rows the same way.
+    c_t = centre.T
+    cand = jnp.zeros((8, 3)).at[1, 1].set(-1.0)
+    assert not bool(contradicted_by_centre(cand, c_t, jnp.array([2.0, 0.0]), 0.2)[1, 1])
+    jitted = jax.jit(contradicted_by_centre)(cand, c_t, jnp.array([2.0, 0.0]), 0.2)
+    assert jitted.shape == (8, 3) and jitted.dtype == jnp.bool_
+
+
+@pytest.mark.parametrize("visibility", [False, True])
+def test_frame_strip_takes_the_surface_from_outside(visibility):
+    """Centre column of 5 views, centre map: background (disparity -2) in rows 0-3, a
+    foreground (+1) from row 4. In view 4 (two steps down) the foreground moves up by 2 and
+    the background down by 4, behind the foreground: rows 0-1 show background from above the
+    centre's frame, and nothing is projected there. An inpainting that spreads the
+    foreground into them is kept without the visibility test (the view's own background
+    fill only sees the foreground below) and replaced by the background of the centre view's
+    top rows with it. The bottom strip, foreground entering from below, keeps the
+    foreground either way."""
+    H, W, U = 12, 6, 5
+    centre = jnp.full((H, W), -2.0).at[4:].set(1.0)
+    _, _, pv, vv = project_cross_hair(centre, (U, 1))
+    vv_np = np.asarray(vv)
+    assert not vv_np[4, :2].any() and vv_np[4, 2:10].all() and not vv_np[4, 10:].any()
+    maps = jnp.where(vv, pv, 1.0).at[U // 2].set(centre)
+    offsets = jnp.stack([jnp.arange(U) - U // 2, jnp.zeros(U)], axis=1).astype(jnp.float32)
+    config = dataclasses.replace(ReconstructConfig(), epi=EpiConfig(visibility_fill=visibility))
+    out = np.asarray(
+        _cross_hair_fill(maps, vv, jnp.ones_like(maps), U // 2, offsets, centre, config)
+    )
+    np.testing.assert_array_equal(out[U // 2], np.asarray(centre))
+    np.testing.assert_array_equal(out[4, 2:10], np.asarray(pv)[4, 2:10])
+    np.testing.assert_array_equal(out[4, 10:], 1.0)
+    np.testing.assert_array_equal(out[4, :2], -2.0 if visibility else 1.0)
