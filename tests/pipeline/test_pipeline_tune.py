@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import numpy as np
 import pytest
 
@@ -15,6 +16,17 @@ from mvedge_jax.pipeline import (
     tune,
 )
 from mvedge_jax.synthetic import make_scene
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _no_persistent_cache_writes():
+    """No persistent-cache writes in this module: serialising the executable of `tune`'s
+    gradient through the whole chain crashed jaxlib 0.10.2 (segmentation fault in
+    ``put_executable_and_time``) in two CI runs from a fresh clone."""
+    old = jax.config.jax_persistent_cache_min_compile_time_secs
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1e9)
+    yield
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", old)
 
 
 @pytest.fixture(scope="module")
