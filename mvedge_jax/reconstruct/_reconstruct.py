@@ -80,16 +80,23 @@ def _nearest_along(values: Array, valid: Array, axis: int, reverse: bool) -> tup
     return jnp.take_along_axis(values, near, axis=axis), found
 
 
+def _farthest_nearest(values: Array, valid: Array, axes: tuple[int, ...]) -> Array:
+    """The smallest (farthest) of the nearest valid values before and after each pixel along
+    each of ``axes``; ``inf`` where none of those rays meets a valid value."""
+    big = jnp.asarray(jnp.inf, values.dtype)
+    best = jnp.full(values.shape, big)
+    for axis in axes:
+        for reverse in (False, True):
+            v, found = _nearest_along(values, valid, axis, reverse)
+            best = jnp.minimum(best, jnp.where(found, v, big))
+    return best
+
+
 def background_fill(values: Float[Array, "H W"], valid: Bool[Array, "H W"]) -> Float[Array, "H W"]:
     """Fill holes with the farthest (smallest) of the nearest valid values left, right, above
     and below — disocclusions show the background. Pixels with no valid value on any of the
     four rays (an all-invalid map) stay 0."""
-    big = jnp.asarray(jnp.inf, values.dtype)
-    best = jnp.full(values.shape, big)
-    for axis in (0, 1):
-        for reverse in (False, True):
-            v, found = _nearest_along(values, valid, axis, reverse)
-            best = jnp.minimum(best, jnp.where(found, v, big))
+    best = _farthest_nearest(values, valid, (0, 1))
     best = jnp.where(jnp.isfinite(best), best, 0.0)
     return jnp.where(valid, values, best)
 
@@ -223,30 +230,26 @@ def _cross_hair_fill(
     ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map."""
     ok = valid & (conf > config.epi.min_confidence)
     view_bg = jax.vmap(background_fill)(maps, ok)
-    fallback = jnp.where(ok, maps, jnp.minimum(maps, view_bg))
+    farther = jnp.minimum(maps, view_bg)
+    fallback = jnp.where(ok, maps, farther)
     if config.epi.visibility_fill:
         # The farther of the nearest valid values of the same pixel in the views before and
         # after along the cross-hair (the EPI's angular axis).
-        big = jnp.asarray(jnp.inf, maps.dtype)
-        epi_bg = jnp.full(maps.shape, big)
-        for reverse in (False, True):
-            v, found = _nearest_along(maps, ok, 0, reverse)
-            epi_bg = jnp.minimum(epi_bg, jnp.where(found, v, big))
+        epi_bg = _farthest_nearest(maps, ok, (0,))
+        epi_bg = jnp.where(jnp.isfinite(epi_bg), epi_bg, farther)
         tol = config.epi.visibility_tol
-
-        def bad(c):
-            return jax.vmap(contradicted_by_centre, (0, None, 0, None))(c, centre_map, offsets, tol)
-
-        old = jnp.minimum(maps, view_bg)
-        epi_bg = jnp.where(jnp.isfinite(epi_bg), epi_bg, old)
+        cands = jnp.stack([maps, view_bg, epi_bg])
+        bad = jax.vmap(jax.vmap(contradicted_by_centre, (0, None, 0, None)), (0, None, None, None))(
+            cands, centre_map, offsets, tol
+        )
+        # `farther` is the inpainted value or the view background, pixel by pixel.
+        bad_farther = jnp.where(maps <= view_bg, bad[0], bad[1])
         # Keep the farther of inpainted value and view background unless the centre view
         # contradicts it; else the nearest of inpainted value, view background and angular
         # background that the centre view does not contradict.
-        cands = jnp.stack([maps, view_bg, epi_bg])
-        allowed = ~jax.vmap(bad)(cands)
-        best = jnp.max(jnp.where(allowed, cands, -jnp.inf), axis=0)
-        chosen = jnp.where(bad(old) & jnp.any(allowed, axis=0), best, old)
-        fallback = jnp.where(ok, maps, jnp.where(valid, fallback, chosen))
+        best = jnp.max(jnp.where(bad, -jnp.inf, cands), axis=0)
+        chosen = jnp.where(bad_farther & ~jnp.all(bad, axis=0), best, farther)
+        fallback = jnp.where(ok, maps, jnp.where(valid, farther, chosen))
     return fallback.at[centre].set(maps[centre])
 
 

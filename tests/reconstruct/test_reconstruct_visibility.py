@@ -34,8 +34,8 @@ def test_contradicted_by_centre_hand_computed():
     assert not at(2, 0.75)  # x = 3.5: pixel 4 (disparity 1 > 0.95) may hide it
     assert at(2, 0.25)  # x = 2.5: pixels 2 and 3 both show disparity 0 <= 0.45
     assert not at(3, 0.0)  # x = 3 exactly: pixel 4 is nearer
-    assert at(1, 1.0)  # x = 3: the centre sees background, not a surface at 1...
-    assert at(2, 1.0)  # x = 4: ...and sees this foreground itself: it would have landed
+    assert at(1, 1.0)  # x = 3: pixel 4 shows this surface (1 <= 1.2): it would have landed
+    assert at(2, 1.0)  # x = 4: likewise
     # The vertical offset traces rows the same way.
     c_t = centre.T
     cand = jnp.zeros((8, 3)).at[1, 1].set(-1.0)
