@@ -3,6 +3,7 @@ devices."""
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import jax
@@ -19,6 +20,43 @@ from ._config import PipelineConfig, get_path, replace_paths
 def _centre_disparity(out: ChainOutput) -> Array:
     U, V = out.disparity.shape[:2]
     return out.disparity[U // 2, V // 2]
+
+
+@functools.lru_cache(maxsize=16)
+def _program(
+    paths: tuple[str, ...],
+    d_max: float,
+    reduce: Callable[[ChainOutput], object],
+    batch_size: int | None,
+    mesh: Mesh | None,
+) -> Callable:
+    """The jitted sweep ``(rows (n, k), views, config, key) -> reduce's pytree``. The base
+    configuration and the key are arguments, not constants of the program: a later call with
+    other hyperparameter values, another key or another grid of the same length reuses the
+    compiled program (`jax.jit` keys it on shapes and the configuration's static fields).
+    With a ``mesh`` (one axis ``"sweep"``) the rows are split over its devices."""
+
+    def one(row, views, config, key):
+        c = replace_paths(config, {p: row[i] for i, p in enumerate(paths)})
+        return reduce(estimate_disparity_arrays(views, c, key=key, d_max=d_max))
+
+    def local(rows, views, config, key):
+        if batch_size is None:
+            return jax.vmap(one, in_axes=(0, None, None, None))(rows, views, config, key)
+        return jax.lax.map(lambda r: one(r, views, config, key), rows, batch_size=batch_size)
+
+    if mesh is None:
+        return jax.jit(local)
+    return jax.jit(
+        jax.shard_map(
+            local,
+            mesh=mesh,
+            in_specs=(P("sweep"), P(), P(), P()),
+            out_specs=P("sweep"),
+            # the chain's solver loops start from replicated constants: no varying-axis typing
+            check_vma=False,
+        )
+    )
 
 
 def sweep(
@@ -40,7 +78,10 @@ def sweep(
     memory), and ``reduce`` keeps what is needed of each output. With more than one device
     the settings are split across them (``jax.shard_map`` over a one-axis mesh ``"sweep"``;
     the views are replicated), padded to a multiple of the device count. The program is
-    compiled once for all ``n`` settings; the values are traced.
+    compiled once for all ``n`` settings; the values, the base configuration's array fields
+    and the key are traced, so a later call that changes only those (e.g. the same grid at
+    another ``reconstruct.centre.omega``) reuses it. It is keyed on ``reduce`` too: pass a
+    function defined once, not a new lambda per call.
 
     Args:
         views: ``(U, V, H, W, 3)`` RGB in [0, 1].
@@ -50,7 +91,7 @@ def sweep(
         key: PRNG key of the chain.
         d_max: the filter bank's half-range, pixels per view step (static).
         reduce: maps one `ChainOutput` to the pytree kept per setting (default: the centre
-            view's ``(H, W)`` disparity). Must be jittable.
+            view's ``(H, W)`` disparity). Must be jittable and hashable.
         batch_size: settings evaluated at once per device (``None``: all, with ``vmap``).
         devices: devices to shard over (default ``jax.devices()``).
 
@@ -85,32 +126,14 @@ def sweep(
     dtype = jnp.result_type(views, jnp.float32)
     grid = np.stack(columns, axis=1)  # (n, k)
 
-    def one(row, views):
-        c = replace_paths(config, {p: row[i] for i, p in enumerate(paths)})
-        return reduce(estimate_disparity_arrays(views, c, key=key, d_max=d_max))
-
-    def local(rows, views):
-        if batch_size is None:
-            return jax.vmap(one, in_axes=(0, None))(rows, views)
-        return jax.lax.map(lambda r: one(r, views), rows, batch_size=batch_size)
-
     devices = list(jax.devices() if devices is None else devices)
-    if len(devices) == 1:
-        return jax.jit(local)(jnp.asarray(grid, dtype), views)
+    mesh = Mesh(np.asarray(devices), ("sweep",)) if len(devices) > 1 else None
+    fn = _program(tuple(paths), float(d_max), reduce, batch_size, mesh)
+    if mesh is None:
+        return fn(jnp.asarray(grid, dtype), views, config, key)
     ndev = len(devices)
     padded = -(-n // ndev) * ndev
     grid = np.concatenate([grid, np.repeat(grid[-1:], padded - n, axis=0)])
-    mesh = Mesh(np.asarray(devices), ("sweep",))
-    fn = jax.jit(
-        jax.shard_map(
-            local,
-            mesh=mesh,
-            in_specs=(P("sweep"), P()),
-            out_specs=P("sweep"),
-            # the chain's solver loops start from replicated constants: no varying-axis typing
-            check_vma=False,
-        )
-    )
     rows = jax.device_put(jnp.asarray(grid, dtype), NamedSharding(mesh, P("sweep")))
     views = jax.device_put(views, NamedSharding(mesh, P()))
-    return jax.tree.map(lambda a: a[:n], fn(rows, views))
+    return jax.tree.map(lambda a: a[:n], fn(rows, views, config, key))

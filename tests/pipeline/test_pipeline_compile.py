@@ -90,6 +90,41 @@ def test_sweep_equals_separate_runs(small):
         )
 
 
+def test_sweep_reuses_its_program_for_new_base_values_and_keys(small, monkeypatch):
+    """The base configuration's array fields and the key are arguments of the compiled sweep,
+    not constants: changing them does not trace the chain again, and the new values are
+    used."""
+    from mvedge_jax.pipeline import _sweep
+
+    traces = []
+    real = _sweep.estimate_disparity_arrays
+
+    def counting(*args, **kwargs):
+        traces.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_sweep, "estimate_disparity_arrays", counting)
+    config = PipelineConfig()
+    d_max = resolve_d_max(config.edges, small.disparity_range)
+    omegas = {"reconstruct.centre.omega": np.array([20.0, 150.0, 600.0])}
+    first = sweep(small.views, config, omegas, key=jax.random.key(0), d_max=d_max)
+    n = len(traces)
+    assert n <= 1, n  # 0 when test_sweep_equals_separate_runs compiled it in this process
+    other = replace_paths(config, {"reconstruct.centre.a": 0.5, "reconstruct.centre.c": 2.0})
+    second = sweep(small.views, other, omegas, key=jax.random.key(1), d_max=d_max)
+    assert len(traces) == n
+    assert not np.allclose(np.asarray(first), np.asarray(second))
+    one = jax.jit(estimate_disparity_arrays, static_argnames="d_max")(
+        jnp.asarray(small.views),
+        replace_paths(other, {"reconstruct.centre.omega": 150.0}),
+        key=jax.random.key(1),
+        d_max=d_max,
+    )
+    # rounding of the batched program against the single one (test_sweep_equals_separate_runs)
+    diff = np.abs(np.asarray(second[1]) - np.asarray(one.disparity[2, 2]))
+    assert np.mean(diff <= 1e-4) >= 0.99 and diff.max() < 5e-3, (np.mean(diff <= 1e-4), diff.max())
+
+
 def test_no_stage_has_a_host_callback(small):
     """Host callbacks would keep the stages out of the persistent cache and the stage store."""
     config = PipelineConfig()
