@@ -9,6 +9,7 @@ of a `PipelineConfig`, and takes Adam steps (optax). It returns a `PipelineConfi
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -35,11 +36,30 @@ from ._config import (
 LOSSES = ("l1", "mse")
 
 
-def _is_positive(config: PipelineConfig, path: str) -> bool:
+def _parametrisation(config: PipelineConfig, path: str) -> tuple[bool, float, float]:
+    """How `tune` optimises the field at ``path``: ``(as_logarithm, low, high)``.
+
+    A field bounded below by 0 (open or closed) whose value is above 0 is optimised as its
+    logarithm (Adam's steps are then relative changes); any other field directly. ``low`` and
+    ``high`` bound the optimised parameter: the field's bounds (an open bound moved inside by
+    one ulp of float32), and for a logarithm the range whose exponential stays a finite,
+    normal float32.
+    """
     owner, _, name = path.rpartition(".")
     f = next(f for f in dataclasses.fields(get_path(config, owner)) if f.name == name)
     spec = field_spec(f)
-    return spec is not None and spec.lower == 0.0 and spec.lower_open
+    lower = None if spec is None else spec.lower
+    upper = None if spec is None else spec.upper
+    info = np.finfo(np.float32)
+    if lower == 0.0 and float(get_path(config, path)) > 0.0:
+        # 1e-6 below log(upper): exp in float32 must not round above the bound
+        high = math.log(float(info.max)) if upper is None else math.log(upper) - 1e-6
+        # 2 above log(tiny): XLA's float32 exp flushes to 0 at the bottom of the normal range
+        return True, math.log(float(info.tiny)) + 2.0, min(high, math.log(float(info.max)))
+    low = -math.inf if lower is None else float(lower)
+    if lower is not None and spec.lower_open:
+        low = float(np.nextafter(np.float32(low), np.float32(np.inf)))
+    return False, low, math.inf if upper is None else float(upper)
 
 
 class TuneScene(eqx.Module):
@@ -110,14 +130,38 @@ def chain_loss(
 
 
 def _encode(config, paths, positive):
-    return {
-        p: (jnp.log(get_path(config, p)) if positive[p] else jnp.asarray(get_path(config, p)))
-        for p in paths
-    }
+    """The optimised parameters: the fields' values (logarithms where ``positive[path]``) as
+    strongly typed arrays. The config's leaves are weakly typed (`as_float`) while optax's
+    updates are not, so without a fixed dtype the second step would trace and compile the
+    chain's gradient again."""
+    theta = {}
+    for p in paths:
+        v = jnp.asarray(get_path(config, p))
+        theta[p] = jnp.asarray(jnp.log(v) if positive[p] else v, dtype=v.dtype)
+    return theta
+
+
+def _project(theta, bounds):
+    """``theta`` clipped to ``bounds[path] = (low, high)`` (dtypes kept)."""
+    return {p: jnp.clip(v, *bounds[p]).astype(v.dtype) for p, v in theta.items()}
 
 
 def _decode(theta, positive):
     return {p: (jnp.exp(v) if positive[p] else v) for p, v in theta.items()}
+
+
+@functools.partial(jax.jit, static_argnames=("positive", "loss"))
+def _loss_and_grad(theta, scene, base, key, *, positive, loss):
+    """`chain_loss` of ``base`` with the decoded ``theta`` and its gradient in ``theta``.
+    Module-level, with the configuration, scene and key as arguments: one compilation per
+    scene shape, static configuration, set of fields and loss, reused by every step and every
+    `tune` call (``positive``: sorted ``(path, optimised as a logarithm)`` pairs)."""
+
+    def objective(theta):
+        values = _decode(theta, dict(positive))
+        return chain_loss(replace_paths(base, values), scene, loss=loss, key=key)
+
+    return jax.value_and_grad(objective)(theta)
 
 
 def tune(
@@ -137,10 +181,14 @@ def tune(
     (edges → surface vectors → centre diffusion → sharpening → propagation) with respect to
     ``fields``. Fields bounded below by 0 (weights, scales, σ, ε) are optimised as
     logarithms, so a step of ``learning_rate`` is a relative change of about that much and
-    they stay positive. A step whose loss or gradient is not finite is skipped. Use
+    they stay positive; such a field that starts at 0, and every other field, is optimised
+    directly. After every step each field is projected onto its bounds, so the returned
+    configuration is always valid. A step whose loss or gradient is not finite is skipped. Use
     `smooth_config` for ``edges.label.temperature`` and ``reconstruct.sharpen.wmf_sigma``, in
-    which the default (hard) chain is piecewise constant. One compilation per scene shape; the
-    values are traced.
+    which the default (hard) chain is piecewise constant. The gradient is compiled once per
+    scene shape, static configuration, set of ``fields`` and ``loss``, and reused by every
+    step and by later calls (new starting values, learning rates or step counts do not
+    recompile); the values are traced.
 
     Args:
         config: the starting `PipelineConfig`.
@@ -188,20 +236,18 @@ def tune(
     if loss not in LOSSES:
         raise ValueError(f"loss must be one of {LOSSES}; got {loss!r}")
     prepared = [TuneScene.from_light_field(lf, config) for lf in scenes]
-    positive = {p: _is_positive(config, p) for p in fields}
+    param = {p: _parametrisation(config, p) for p in fields}
+    positive = {p: param[p][0] for p in fields}
+    bounds = {p: param[p][1:] for p in fields}
     key = jax.random.key(0) if key is None else key
 
-    @jax.jit
-    def value_and_grad(theta, scene, base):
-        def objective(theta):
-            return chain_loss(
-                replace_paths(base, _decode(theta, positive)), scene, loss=loss, key=key
-            )
-
-        return jax.value_and_grad(objective)(theta)
+    signs = tuple(sorted(positive.items()))
 
     def total(theta):
-        vals, grads = zip(*(value_and_grad(theta, s, config) for s in prepared), strict=True)
+        vals, grads = zip(
+            *(_loss_and_grad(theta, s, config, key, positive=signs, loss=loss) for s in prepared),
+            strict=True,
+        )
         n = len(prepared)
         g = jax.tree.map(lambda *xs: sum(xs) / n, *grads)
         return sum(float(v) for v in vals) / n, g
@@ -218,7 +264,7 @@ def tune(
         record = {p: float(v) for p, v in _decode(theta, positive).items()}
         if ok:
             updates, state = opt.update(g, state, theta)
-            theta = optax.apply_updates(theta, updates)
+            theta = _project(optax.apply_updates(theta, updates), bounds)
         record.update(
             loss=value, grad_norm=gnorm, seconds=time.perf_counter() - t0, skipped=float(not ok)
         )

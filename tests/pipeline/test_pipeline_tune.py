@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import math
+
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
 from mvedge_jax.pipeline import (
     PipelineConfig,
+    _tune,
     config_from_toml,
     config_to_toml,
     estimate_disparity,
     get_path,
+    replace_paths,
     smooth_config,
     tune,
 )
@@ -63,6 +68,52 @@ def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     )
     result = estimate_disparity(scenes[0], back)
     assert np.isfinite(np.asarray(result.disparity)).all()
+
+
+def test_tune_traces_the_chain_once_for_all_steps_and_calls(scenes, monkeypatch):
+    """Every Adam step and a second `tune` call (other start values, learning rate and step
+    count) reuse one compiled gradient: the chain is traced at most once."""
+    traces = []
+    real = _tune.chain_loss
+
+    def counting(*args, **kwargs):
+        traces.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(_tune, "chain_loss", counting)
+    config = smooth_config()
+    fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
+    _, hist = tune(config, scenes, fields=fields, steps=2, learning_rate=0.3)
+    first = len(traces)
+    assert first <= 1, first  # 0 when an earlier test of this module compiled it
+    start = replace_paths(config, {"reconstruct.centre.omega": 80.0})
+    _, hist2 = tune(start, scenes, fields=fields, steps=3, learning_rate=0.1)
+    assert len(traces) == first
+    assert hist2["reconstruct.centre.omega"][0] == pytest.approx(80.0)
+    assert hist2["loss"][0] != pytest.approx(hist["loss"][0])  # the new start is used
+
+
+def test_tune_optimises_positive_fields_as_logarithms_within_their_bounds():
+    config = PipelineConfig()
+    # closed lower bound 0, value above it (ω = 150, epi c = 0.1): logarithm
+    for path in ("reconstruct.centre.omega", "reconstruct.epi.c", "surface.smooth_eps"):
+        as_log, low, high = _tune._parametrisation(config, path)
+        assert as_log, path
+        assert math.exp(low) > 0 and math.isfinite(math.exp(high))
+    # at its closed bound 0 (the default anti-aliasing σ): directly, kept >= 0
+    assert _tune._parametrisation(config, "edges.filter.aa_sigma") == (False, 0.0, math.inf)
+    # unbounded: directly, not clipped
+    assert _tune._parametrisation(config, "reconstruct.centre.a") == (False, -math.inf, math.inf)
+    bounds = {
+        "aa": _tune._parametrisation(config, "edges.filter.aa_sigma")[1:],
+        "c": _tune._parametrisation(config, "reconstruct.epi.c")[1:],
+        "a": (-math.inf, math.inf),
+    }
+    theta = {"aa": jnp.float32(-0.4), "c": jnp.float32(-500.0), "a": jnp.float32(-7.0)}
+    out = _tune._project(theta, bounds)
+    assert float(out["aa"]) == 0.0 and float(out["a"]) == -7.0
+    assert float(jnp.exp(out["c"])) > 0.0  # a valid (> 0) value after decoding
+    assert all(v.dtype == jnp.float32 and not v.weak_type for v in out.values())
 
 
 def test_tune_rejects_bad_requests(scenes):
