@@ -72,6 +72,9 @@ class SharpenConfig(eqx.Module):
         refine_jump: (threshold) photo-consistent boundary snapping (`photo_refine`) acts where the
             disparity range of the window exceeds this (pixels per view step).
         refine_margin: (threshold) colour-cost advantage a candidate needs over the current value.
+        refine_near_weight: (threshold) weight of the cross-hair views one step from the
+            centre in the snapping's colour cost (`photo_refine`'s ``near_weight``; the
+            others weigh 1).
         matte_jump: (threshold) disparity range of a window that marks a depth discontinuity for
             `boundary_matte` (pixels per view step).
         matte_min_separation: (threshold) `boundary_matte` decides only where the foreground and
@@ -139,6 +142,7 @@ class SharpenConfig(eqx.Module):
     wmf_sigma: Array = hyperparameter(0.05, differentiable=True, lower=0.0, lower_open=True)
     refine_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
+    refine_near_weight: Array = hyperparameter(1.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)

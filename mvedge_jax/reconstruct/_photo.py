@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from jax import lax
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ..lightfield import backward_warp_planar, ssim_dissimilarity
 
@@ -54,6 +54,7 @@ def photo_cost(
     aggregate: int = 0,
     sigma: float = 0.1,
     ssim: float | Array = 0.0,
+    weights: Float[ArrayLike, " K"] | None = None,
 ) -> Float[Array, "H W"]:
     """Occlusion-aware colour cost of a disparity hypothesis per pixel.
 
@@ -80,6 +81,8 @@ def photo_cost(
         ssim: weight of the SSIM dissimilarity (0: colour L1 only). SSIM compares local
             structure normalised by contrast, so it still tells disparities apart on faint
             texture where the L1 difference is at the level of the noise.
+        weights: ``(K,)`` non-negative weight of each view in the half-plane means
+            (default: all 1).
 
     Returns:
         ``(H, W)`` cost (colour units), ``inf`` where no view sees the pixel.
@@ -89,10 +92,14 @@ def photo_cost(
     """
 
     planes = jnp.moveaxis(views, -1, -3)
-    return _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, ssim)
+    return _photo_cost_planar(
+        candidate, reference, planes, offsets, aggregate, sigma, ssim, weights=weights
+    )
 
 
-def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, ssim=0.0):
+def _photo_cost_planar(
+    candidate, reference, planes, offsets, aggregate, sigma, ssim=0.0, *, weights=None
+):
     """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
     `backward_warp_planar`), so that callers looping over candidates transpose them once.
     A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation."""
@@ -118,6 +125,8 @@ def _photo_cost_planar(candidate, reference, planes, offsets, aggregate, sigma, 
     costs, inside = jax.vmap(diff)(planes, offsets)  # (K, H, W) each
     dr, dc = offsets[:, 0], offsets[:, 1]
     groups = jnp.stack([dc < 0, dc > 0, dr < 0, dr > 0]).astype(costs.dtype)  # (4, K)
+    if weights is not None:
+        groups = groups * jnp.asarray(weights, costs.dtype)[None]
     m = inside.astype(costs.dtype)
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
@@ -139,6 +148,7 @@ def photo_refine(
     iterations: int = 2,
     aggregate: int = 2,
     sigma: float | Array = 0.1,
+    near_weight: float | Array = 1.0,
 ) -> Float[Array, "H W"]:
     """Snap pixels next to depth discontinuities to the photo-consistent side.
 
@@ -162,19 +172,25 @@ def photo_refine(
         iterations: passes.
         aggregate: radius of the colour-weighted cost aggregation (0 = per pixel).
         sigma: colour scale of the aggregation weights (reference units).
+        near_weight: weight, in `photo_cost`'s half-plane means, of the views one view step
+            from the reference (``max(|dr|, |dc|) <= 1``); the others weigh 1.
 
     Returns:
         ``(H, W)`` refined disparity.
     """
 
     planes = jnp.moveaxis(views, -1, -3)
+    near = jnp.max(jnp.abs(jnp.asarray(offsets)), axis=-1) <= 1
+    weights = jnp.where(near, jnp.asarray(near_weight, planes.dtype), jnp.ones((), planes.dtype))
 
     def one(_, d):
         lo, hi = _window_extrema(d, radius)
         band = (hi - lo) > jump
 
         def cost(c):
-            return _photo_cost_planar(c, reference, planes, offsets, aggregate, sigma)
+            return _photo_cost_planar(
+                c, reference, planes, offsets, aggregate, sigma, weights=weights
+            )
 
         c_own, c_hi, c_lo = cost(d), cost(hi), cost(lo)
         best = jnp.where(c_hi <= c_lo, hi, lo)

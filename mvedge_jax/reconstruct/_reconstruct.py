@@ -289,6 +289,7 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
         jump=sc.refine_jump,
         margin=sc.refine_margin,
         iterations=iterations,
+        near_weight=sc.refine_near_weight,
         aggregate=sc.refine_aggregate,
     )
 

@@ -34,6 +34,35 @@ def test_photo_cost_is_lowest_at_the_truth(small_scene):
     assert costs[1] < 0.5 * min(costs[0], costs[2]), costs
 
 
+def test_photo_cost_view_weights_in_the_half_plane_means():
+    rng = np.random.default_rng(0)
+    ref = jnp.asarray(rng.uniform(0.2, 0.6, (8, 10, 3)), jnp.float32)
+    views = jnp.stack([ref, ref + 0.1])  # per-view L1 costs 0 and 0.3 (three channels)
+    offsets = jnp.asarray([[0.0, -1.0], [0.0, -2.0]])  # both in the left half-plane
+    flat = jnp.zeros((8, 10))  # identity warps
+    equal = photo_cost(flat, ref, views, offsets)
+    np.testing.assert_allclose(np.asarray(equal), 0.15, atol=1e-6)
+    weighted = photo_cost(flat, ref, views, offsets, weights=jnp.asarray([3.0, 1.0]))
+    np.testing.assert_allclose(np.asarray(weighted), 0.3 / 4, atol=1e-6)
+    ones = photo_cost(flat, ref, views, offsets, weights=jnp.ones(2))
+    np.testing.assert_array_equal(np.asarray(ones), np.asarray(equal))
+
+
+def test_photo_refine_near_weight(small_scene):
+    lf, _, _ = small_scene
+    views, offsets = cross_hair(lf)
+    halo = jnp.asarray(grey_dilation(np.asarray(lf.centre_gt), size=(5, 5)))
+    f = jax.jit(
+        lambda d, w: photo_refine(
+            d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4, near_weight=w
+        )
+    )
+    plain = photo_refine(halo, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4)
+    np.testing.assert_array_equal(np.asarray(f(halo, 1.0)), np.asarray(plain))
+    # weight 0 leaves the views one step away out of the cost: a different decision somewhere
+    assert not np.array_equal(np.asarray(f(halo, 0.0)), np.asarray(plain))
+
+
 def test_photo_refine_removes_a_foreground_halo(small_scene):
     lf, _, _ = small_scene
     views, offsets = cross_hair(lf)
