@@ -40,3 +40,23 @@ def x64():
         yield
     finally:
         jax.config.update("jax_enable_x64", False)
+
+
+@pytest.fixture
+def count_calls(monkeypatch):
+    """``count_calls(module, name)`` replaces ``module.name`` by a wrapper for the test and
+    returns a list that grows by one per call. Inside a jitted function the Python body runs
+    only while JAX traces it, so the list counts traces."""
+
+    def install(module, name: str) -> list:
+        calls: list = []
+        real = getattr(module, name)
+
+        def counting(*args, **kwargs):
+            calls.append(1)
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(module, name, counting)
+        return calls
+
+    return install

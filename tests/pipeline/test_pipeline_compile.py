@@ -90,20 +90,13 @@ def test_sweep_equals_separate_runs(small):
         )
 
 
-def test_sweep_reuses_its_program_for_new_base_values_and_keys(small, monkeypatch):
+def test_sweep_reuses_its_program_for_new_base_values_and_keys(small, count_calls):
     """The base configuration's array fields and the key are arguments of the compiled sweep,
     not constants: changing them does not trace the chain again, and the new values are
     used."""
     from mvedge_jax.pipeline import _sweep
 
-    traces = []
-    real = _sweep.estimate_disparity_arrays
-
-    def counting(*args, **kwargs):
-        traces.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(_sweep, "estimate_disparity_arrays", counting)
+    traces = count_calls(_sweep, "estimate_disparity_arrays")
     config = PipelineConfig()
     d_max = resolve_d_max(config.edges, small.disparity_range)
     omegas = {"reconstruct.centre.omega": np.array([20.0, 150.0, 600.0])}

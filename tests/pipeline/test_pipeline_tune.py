@@ -70,17 +70,10 @@ def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     assert np.isfinite(np.asarray(result.disparity)).all()
 
 
-def test_tune_traces_the_chain_once_for_all_steps_and_calls(scenes, monkeypatch):
+def test_tune_traces_the_chain_once_for_all_steps_and_calls(scenes, count_calls):
     """Every Adam step and a second `tune` call (other start values, learning rate and step
     count) reuse one compiled gradient: the chain is traced at most once."""
-    traces = []
-    real = _tune.chain_loss
-
-    def counting(*args, **kwargs):
-        traces.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(_tune, "chain_loss", counting)
+    traces = count_calls(_tune, "chain_loss")
     config = smooth_config()
     fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
     _, hist = tune(config, scenes, fields=fields, steps=2, learning_rate=0.3)
