@@ -84,6 +84,8 @@ class SharpenConfig(eqx.Module):
         sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
             view step. Smooth where the chosen hypothesis does not change (the hypotheses
             scale with it).
+        sweep_margin: (threshold) relative cost advantage over the pixel's own value that a
+            plane-sweep move needs (`photo_sweep`'s ``margin``; 0 = none).
 
     Attributes (static):
         enabled: apply the weighted median filter to the centre disparity (Sec. 6.1).
@@ -147,6 +149,7 @@ class SharpenConfig(eqx.Module):
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
+    sweep_margin: Array = hyperparameter(0.1, differentiable=False, lower=0.0, upper=1.0)
     enabled: bool = static(True)
     filter: str = static("median", choices=SHARPEN_FILTERS)
     wmf_radius: int = static(7, lower=1, upper=64)

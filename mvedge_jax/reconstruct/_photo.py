@@ -288,6 +288,7 @@ def photo_sweep(
     aggregate: int = 2,
     sigma: float | Array = 0.1,
     ssim: float | Array = 0.0,
+    margin: float | Array = 0.0,
 ) -> Float[Array, "H W"]:
     """Sub-pixel photo-consistent correction of a disparity map by a local plane sweep.
 
@@ -315,6 +316,11 @@ def photo_sweep(
         aggregate: radius of the colour-weighted cost aggregation of `photo_cost`.
         sigma: colour scale of the aggregation weights.
         ssim: weight of the SSIM dissimilarity in the cost (a concrete 0 leaves it out).
+        margin: relative significance of a move: the value changes only where the lowest
+            cost is at most ``(1 − margin)`` times the cost of the pixel's own value (the
+            middle hypothesis). With ``margin > 0`` a pixel whose own value is the best
+            hypothesis keeps it (no vertex step), and cost differences at the level of the
+            noise move nothing. 0: no test.
 
     Returns:
         ``(H, W)`` corrected disparity, changed by at most ``search`` per pixel.
@@ -341,7 +347,9 @@ def photo_sweep(
     inner, vertex, finite = _parabola_vertex(costs, best)
     # Hypotheses are 2 / (steps − 1) apart in units of ``search``.
     moved = disparity + (unit[inner] + 2.0 * vertex / (steps - 1)) * search
-    take = (best > 0) & (best < steps - 1) & finite
+    c_best = jnp.min(costs, axis=0)
+    significant = c_best <= (1.0 - jnp.asarray(margin, costs.dtype)) * costs[steps // 2]
+    take = (best > 0) & (best < steps - 1) & finite & significant
     return jnp.where(take, moved, disparity)
 
 

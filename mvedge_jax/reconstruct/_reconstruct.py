@@ -357,6 +357,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             search=sc.sweep_search,
             aggregate=sc.sweep_aggregate,
             ssim=sc.sweep_ssim,
+            margin=sc.sweep_margin,
         )
     slope = None
     if sc.enabled and sc.wmf_slope_baseline > 0:
