@@ -149,7 +149,7 @@ class SharpenConfig(eqx.Module):
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
-    sweep_margin: Array = hyperparameter(0.1, differentiable=False, lower=0.0, upper=1.0)
+    sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
     enabled: bool = static(True)
     filter: str = static("median", choices=SHARPEN_FILTERS)
     wmf_radius: int = static(7, lower=1, upper=64)
