@@ -144,8 +144,8 @@ def run_scene(lf, out_root: str | None, config: PipelineConfig | None = None) ->
 
 
 def _score_scenes(configs: dict, cache: Path | None) -> dict:
-    """``{scene: {label: (MSE×100, BadPix(0.07), Q25×100)}}`` of the sharpened centre view (compiled
-    once per scene: only array leaves of the configs differ)."""
+    """``{scene: {label: (MSE×100, BadPix(0.07), Q25×100)}}`` of the sharpened centre view
+    (compiled once per scene: only array leaves of the configs differ)."""
     out = {}
     for name in VALIDATION_SCENES:
         lf = load_scene(name)
@@ -274,33 +274,19 @@ def leave_one_out(cache: Path | None, grid: dict | None = None, criterion: str =
         d, p = scores[held]["default"], scores[held][pick]
         table.append({"held_out": held, "picked": pick, "default": d, "held_out_score": p})
         print(f"{held:<22}{pick:<40}{d[0]:>13.3f}{p[0]:>10.3f}{d[1]:>11.2f}{p[1]:>10.2f}")
-    mean_ratio = float(
-        np.exp(np.mean([np.log(r["held_out_score"][0] / r["default"][0]) for r in table]))
-    )
-    bp_ratio = float(
-        np.exp(
-            np.mean(
-                [
-                    np.log(max(r["held_out_score"][1], 1e-3) / max(r["default"][1], 1e-3))
-                    for r in table
-                ]
-            )
-        )
-    )
+
+    def held_out(col: int) -> float:  # geometric mean of held-out / default in one column
+        logs = [
+            np.log(max(r["held_out_score"][col], 1e-3) / max(r["default"][col], 1e-3))
+            for r in table
+        ]
+        return float(np.exp(np.mean(logs)))
+
+    mean_ratio, bp_ratio, q25_ratio = held_out(0), held_out(1), held_out(2)
     best_all = min(labels, key=lambda lab: _ratio(scores, scenes, lab, criterion))
     print(f"picked by: {criterion} ratio to the default, geometric mean over the other scenes")
     print(f"held-out MSE×100 ratio to the default, geometric mean over scenes: {mean_ratio:.3f}")
     print(f"held-out BadPix(0.07) ratio to the default, geometric mean over scenes: {bp_ratio:.3f}")
-    q25_ratio = float(
-        np.exp(
-            np.mean(
-                [
-                    np.log(max(r["held_out_score"][2], 1e-3) / max(r["default"][2], 1e-3))
-                    for r in table
-                ]
-            )
-        )
-    )
     print(f"held-out Q25×100 ratio to the default, geometric mean over scenes: {q25_ratio:.3f}")
     print(
         f"best on all scenes: {best_all} (ratio {_ratio(scores, scenes, best_all, criterion):.3f})"
