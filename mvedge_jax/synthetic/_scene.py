@@ -31,6 +31,7 @@ from ..lightfield import LightField, view_offsets
 
 WHOLE, RECT, DISC = 0, 1, 2
 N_MODES = 6  # smooth colour-noise sinusoids per surface
+N_SHADE = 2  # view-dependent shading sinusoids per surface
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,6 +53,11 @@ class Surface:
             ``[sin(k1·p + phase1) > thresh1] XOR [sin(k2·p + phase2) > thresh2]`` (a checker
             when ``k2 != 0``; stripes when ``k2 = 0`` and ``sin(phase2) <= thresh2``).
         stripe_colour: RGB added where the pattern is on (may be negative).
+        shading: ``(N_SHADE, 5)`` rows ``(kx, ky, phase, amp_dc, amp_dr)``: view-dependent
+            shading, a first-order model of a glossy surface. The view at offset
+            ``(dr, dc)`` (view steps from the centre) sees its point ``(X, Y)`` brighter by
+            ``Σ sin(kx X + ky Y + phase) (amp_dc dc + amp_dr dr)`` in every channel (zero
+            in the centre view; the ground truth is unaffected).
     """
 
     plane: tuple[float, float, float]
@@ -63,6 +69,7 @@ class Surface:
     noise: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((N_MODES, 6)))
     stripes: tuple[float, ...] = (0.0, 0.0, -np.pi / 2, 0.0, 0.0, 0.0, -np.pi / 2, 0.0)
     stripe_colour: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    shading: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((N_SHADE, 5)))
 
 
 def _pack(surfaces: list[Surface]) -> dict[str, jax.Array]:
@@ -70,7 +77,13 @@ def _pack(surfaces: list[Surface]) -> dict[str, jax.Array]:
     table = np.array(
         [
             np.concatenate(
-                [s.base, np.asarray(s.noise, float).reshape(-1), s.stripes, s.stripe_colour]
+                [
+                    s.base,
+                    np.asarray(s.noise, float).reshape(-1),
+                    s.stripes,
+                    s.stripe_colour,
+                    np.asarray(s.shading, float).reshape(-1),
+                ]
             )
             for s in surfaces
         ],
@@ -88,7 +101,7 @@ def _pack(surfaces: list[Surface]) -> dict[str, jax.Array]:
     }
 
 
-_N_TEX = 3 + 6 * N_MODES + 8 + 3  # base, noise modes, stripes, stripe colour
+_N_TEX = 3 + 6 * N_MODES + 8 + 3 + 5 * N_SHADE  # base, noise, stripes + colour, shading
 
 
 def _geometry(p, xs, ys, dr, dc):
@@ -136,8 +149,9 @@ def _sin(x):
     return z * (1 + z2 * (-1 / 6 + z2 * (1 / 120 + z2 * (-1 / 5040 + z2 / 362880))))
 
 
-def _texture(p, w, X, Y):
-    """RGB ``(..., 3)`` of surface ``w`` at centre-view coordinates ``(X, Y)``.
+def _texture(p, w, X, Y, dr=0.0, dc=0.0):
+    """RGB ``(..., 3)`` of surface ``w`` at centre-view coordinates ``(X, Y)``, seen from the
+    view at offset ``(dr, dc)`` (broadcast against ``X``; view-dependent shading).
 
     Per-sample texture parameters are selected with a ``where`` chain over the surfaces
     (element-wise and fused; per-sample gathers were ~4x slower on CPU).
@@ -156,7 +170,12 @@ def _texture(p, w, X, Y):
     on1 = _sin(R[o] * X + R[o + 1] * Y + R[o + 2]) > R[o + 3]
     on2 = _sin(R[o + 4] * X + R[o + 5] * Y + R[o + 6]) > R[o + 7]
     pattern = (on1 ^ on2).astype(X.dtype)
-    rgb = jnp.stack([col[i] + pattern * R[o + 8 + i] for i in range(3)], axis=-1)
+    col = [col[i] + pattern * R[o + 8 + i] for i in range(3)]
+    for m in range(N_SHADE):
+        q = 3 + 6 * N_MODES + 11 + 5 * m
+        shade = _sin(R[q] * X + R[q + 1] * Y + R[q + 2]) * (R[q + 3] * dc + R[q + 4] * dr)
+        col = [c + shade for c in col]
+    rgb = jnp.stack(col, axis=-1)
     return jnp.clip(rgb, 0.0, 1.0)
 
 
@@ -184,9 +203,12 @@ def _render_geometry(p, offsets, *, H: int, W: int, ss: int):
 
 
 @jax.jit
-def _render_colour(p, w, X, Y):
-    """Mean texture colour over the sub-pixel axis 1: ``(N, ss², H, W)`` → ``(N, H, W, 3)``."""
-    return _texture(p, w, X, Y).mean(axis=1)
+def _render_colour(p, w, X, Y, offsets):
+    """Mean texture colour over the sub-pixel axis 1: ``(N, ss², H, W)`` → ``(N, H, W, 3)``,
+    the views at ``offsets (N, 2)``."""
+    dr = offsets[:, 0, None, None, None]
+    dc = offsets[:, 1, None, None, None]
+    return _texture(p, w, X, Y, dr, dc).mean(axis=1)
 
 
 def _render(p, offsets, *, H: int, W: int, ss: int, chunk_pixels: int = 1 << 22):
@@ -203,8 +225,9 @@ def _render(p, offsets, *, H: int, W: int, ss: int, chunk_pixels: int = 1 << 22)
     padded = jnp.concatenate([offsets, jnp.repeat(offsets[-1:], n_chunks * step - n, axis=0)])
     rgbs, gts = [], []
     for i in range(n_chunks):
-        gt, w, X, Y = _render_geometry(p, padded[i * step : (i + 1) * step], H=H, W=W, ss=ss)
-        rgbs.append(_render_colour(p, w, X, Y))
+        chunk = padded[i * step : (i + 1) * step]
+        gt, w, X, Y = _render_geometry(p, chunk, H=H, W=W, ss=ss)
+        rgbs.append(_render_colour(p, w, X, Y, chunk))
         gts.append(gt)
     return jnp.concatenate(rgbs)[:n], jnp.concatenate(gts)[:n]
 

@@ -12,24 +12,52 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax.numpy as jnp
 import numpy as np
 
 from ..lightfield import LightField
-from ._scene import DISC, RECT, WHOLE, Surface, make_scene, render_surfaces
+from ._scene import DISC, N_SHADE, RECT, WHOLE, Surface, make_scene, render_surfaces
 
-VARIANTS = ("textureless", "slanted", "thin", "wide")
+VARIANTS = ("textureless", "slanted", "thin", "wide", "glossy")
 
 _N_MODES = 6  # rows of `Surface.noise`
 
+#: The glossy variant's view-dependent shading amplitude per view step and mode, its
+#: sinusoids' wavelengths (pixels), and its render noise: measured on HCI antinous (flat,
+#: faintly textured pixels, ground-truth disparity; docs/ACCURACY.md, "View-dependent
+#: shading"): the part of a view's difference to the centre view smoother than 8 px grows by
+#: ~0.0004 per channel and view step and is mostly smoother than 32 px (of 512), and what
+#: is left after removing the part smoother than 2 px is noise-like, 0.0015 mean absolute
+#: difference (the same measurement on this variant gives 0.0020 / 0.0015 at 4 view steps).
+GLOSS_AMPLITUDE = 5e-4
+GLOSS_WAVELENGTH = (40.0, 120.0)
+GLOSS_NOISE = 2.5e-3
 
-def _textured(rng: np.random.Generator, base, *, period=(7.0, 20.0), contrast=0.3) -> dict:
-    """Texture fields of a `Surface`: smooth colour noise plus hard-edged stripes or a checker."""
+
+def _glossy_texture(rng: np.random.Generator, base) -> dict:
+    """Faint texture (median colour gradient about 0.003 per pixel, as antinous' floor and
+    statue) with view-dependent shading (`Surface.shading`)."""
+    tex = _textured(rng, base, contrast=0.01, noise_amp=0.008)
+    shading = np.zeros((N_SHADE, 5))
+    for m in range(N_SHADE):
+        k = 2 * np.pi / rng.uniform(*GLOSS_WAVELENGTH)
+        t = rng.uniform(0, np.pi)
+        shading[m, :3] = (k * np.cos(t), k * np.sin(t), rng.uniform(0, 2 * np.pi))
+        shading[m, 3:] = GLOSS_AMPLITUDE * rng.choice([-1.0, 1.0], 2)
+    return {**tex, "shading": shading}
+
+
+def _textured(
+    rng: np.random.Generator, base, *, period=(7.0, 20.0), contrast=0.3, noise_amp=0.05
+) -> dict:
+    """Texture fields of a `Surface`: smooth colour noise (amplitudes normal with standard
+    deviation ``noise_amp``) plus hard-edged stripes or a checker (colour ``contrast``)."""
     noise = np.zeros((_N_MODES, 6))
     for m in range(_N_MODES):
         k = 2 * np.pi / rng.uniform(8.0, 50.0)
         t = rng.uniform(0, np.pi)
         noise[m, :3] = (k * np.cos(t), k * np.sin(t), rng.uniform(0, 2 * np.pi))
-        noise[m, 3:] = rng.normal(0.0, 0.05, 3)
+        noise[m, 3:] = rng.normal(0.0, noise_amp, 3)
     k = 2 * np.pi / rng.uniform(*period)
     t = rng.uniform(0, np.pi)
     stripes = [k * np.cos(t), k * np.sin(t), rng.uniform(0, 2 * np.pi), 0.0]
@@ -154,6 +182,44 @@ def _thin(rng, H, W) -> list[Surface]:
     return out
 
 
+def _glossy(rng, H, W) -> list[Surface]:
+    # Antinous-like: faint, glossy surfaces (a back wall, a slanted floor, a statue-like
+    # panel and disc, a board in front), told apart by their base colours.
+    return [
+        Surface(plane=(-1.4, 0.0, 0.0), kind=WHOLE, **_glossy_texture(rng, (0.55, 0.55, 0.6))),
+        Surface(  # from 0.05 H below the centre to beyond the bottom; d = -1.3 at its top
+            plane=(-1.3 - 0.02 * 0.05 * H, 0.0, 0.02),
+            kind=RECT,
+            centre=(0.0, 0.05 * H + 0.5 * H),
+            half_size=(W, 0.5 * H),
+            **_glossy_texture(rng, (0.7, 0.65, 0.55)),
+        ),
+        Surface(
+            plane=(0.2, 0.0, 0.0),
+            kind=RECT,
+            centre=(-0.15 * W, -0.05 * H),
+            half_size=(0.12 * W, 0.3 * H),
+            angle=0.05,
+            **_glossy_texture(rng, (0.8, 0.78, 0.72)),
+        ),
+        Surface(
+            plane=(0.9, 0.0, 0.0),
+            kind=DISC,
+            centre=(-0.15 * W, -0.3 * H),
+            half_size=(0.1 * W, 0.1 * W),
+            **_glossy_texture(rng, (0.82, 0.8, 0.75)),
+        ),
+        Surface(
+            plane=(1.5, -0.005, 0.0),
+            kind=RECT,
+            centre=(0.25 * W, 0.25 * H),
+            half_size=(0.15 * W, 0.08 * H),
+            angle=-0.15,
+            **_glossy_texture(rng, (0.45, 0.35, 0.3)),
+        ),
+    ]
+
+
 def variant_scene(
     kind: str,
     seed: int = 0,
@@ -173,6 +239,11 @@ def variant_scene(
     * ``"wide"``: `make_scene` with ``disparity_range = (−4, 4)`` (GT within ±4 px per view
       step, about [−3.5, 2.8] for seed 0: parallax up to 14 px at the corner views of a
       9×9 grid).
+    * ``"glossy"``: HCI-render-like photometry (`GLOSS_AMPLITUDE`, `GLOSS_WAVELENGTH`,
+      `GLOSS_NOISE`, measured on antinous): faint textures, view-dependent shading
+      (`Surface.shading`) and Gaussian render noise of standard deviation `GLOSS_NOISE`
+      (seeded); a back wall, a slanted floor and three objects; disparities in
+      [−1.40, 1.44].
 
     Textures are random (``seed``); the geometry of the first three is fixed. Built from
     `Surface` and `render_surfaces` (`make_scene` for ``"wide"``).
@@ -205,10 +276,15 @@ def variant_scene(
         )
         return dataclasses.replace(lf, name="synthetic-wide")
     rng = np.random.default_rng(seed)
-    surfaces = {"textureless": _textureless, "slanted": _slanted, "thin": _thin}[kind](rng, H, W)
-    return render_surfaces(
+    build = {"textureless": _textureless, "slanted": _slanted, "thin": _thin, "glossy": _glossy}
+    surfaces = build[kind](rng, H, W)
+    lf = render_surfaces(
         surfaces, grid=grid, size=size, supersample=supersample, name=f"synthetic-{kind}"
     )
+    if kind == "glossy":
+        noise = rng.normal(0.0, GLOSS_NOISE, lf.views.shape).astype(np.float32)
+        lf = dataclasses.replace(lf, views=jnp.clip(lf.views + noise, 0.0, 1.0))
+    return lf
 
 
 def variant_scenes(seed: int = 0, **kwargs) -> dict[str, LightField]:
