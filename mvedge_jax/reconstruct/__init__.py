@@ -22,6 +22,8 @@ from ._photo import photo_refine as photo_refine
 from ._photo import photo_seeds as photo_seeds
 from ._photo import photo_select as photo_select
 from ._photo import photo_sweep as photo_sweep
+from ._photo import remove_shading as remove_shading
+from ._photo import shading_bias as shading_bias
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
 from ._reconstruct import centre_seeds as centre_seeds

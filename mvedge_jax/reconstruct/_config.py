@@ -86,6 +86,13 @@ class SharpenConfig(eqx.Module):
             scale with it).
         sweep_margin: (threshold) relative cost advantage over the pixel's own value that a
             plane-sweep move needs (`photo_sweep`'s ``margin``; 0 = none).
+        shading_threshold: (threshold) largest colour difference (L1 over the channels) of
+            a pixel that enters the shading estimate (`shading_bias`'s ``threshold``).
+        shading_floor: (threshold) soft threshold of the shading estimate, colour units per
+            channel (`shading_bias`'s ``floor``).
+        shading_jump: (threshold) pixels within ``shading_edge_radius`` of a 7×7 window whose
+            disparity range exceeds this (pixels per view step) stay out of the shading
+            estimate.
 
     Attributes (static):
         enabled: apply the weighted median filter to the centre disparity (Sec. 6.1).
@@ -124,6 +131,13 @@ class SharpenConfig(eqx.Module):
         sweep_min_offset: the sweep uses the cross-hair views at least this many view steps
             from the centre (all of them when the light field has no such view): the
             nearest views add little disparity resolution for their cost.
+        shading_sigma: compensate the view-dependent shading of the cross-hair views in the
+            snapping's and the plane sweep's colour costs: `shading_bias` of each view,
+            estimated once with the centre map entering the sharpening, smoothed with this
+            standard deviation (pixels), is subtracted from the warped view (not in the
+            thesis). 0 = off.
+        shading_edge_radius: distance (chessboard, pixels) from a ``shading_jump`` edge within
+            which pixels stay out of the shading estimate.
         matte: after the snapping and before the weighted median, put every pixel on a depth
             discontinuity of the centre map on the side its colour mixture says
             (`boundary_matte`; not in the thesis).
@@ -150,6 +164,9 @@ class SharpenConfig(eqx.Module):
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
+    shading_threshold: Array = hyperparameter(0.015, differentiable=False, lower=0.0)
+    shading_floor: Array = hyperparameter(1e-4, differentiable=False, lower=0.0)
+    shading_jump: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     enabled: bool = static(True)
     filter: str = static("median", choices=SHARPEN_FILTERS)
     wmf_radius: int = static(7, lower=1, upper=64)
@@ -165,6 +182,8 @@ class SharpenConfig(eqx.Module):
     sweep_ssim: float = static(0.0, lower=0.0)
     sweep_aggregate: int = static(2, lower=0, upper=64)
     sweep_min_offset: int = static(2, lower=1, upper=64)
+    shading_sigma: float = static(16.0, lower=0.0)
+    shading_edge_radius: int = static(4, lower=0, upper=64)
     matte: bool = static(True)
     matte_views: bool = static(True)
     matte_radius: int = static(2, lower=1, upper=64)

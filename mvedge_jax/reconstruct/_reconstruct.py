@@ -31,7 +31,14 @@ from ._crosshair import (
     solve_epis,
 )
 from ._matte import boundary_matte
-from ._photo import photo_refine, photo_seeds, photo_select, photo_sweep
+from ._photo import (
+    photo_refine,
+    photo_seeds,
+    photo_select,
+    photo_sweep,
+    remove_shading,
+    shading_bias,
+)
 from ._wmf import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -339,8 +346,22 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
     rc, cc = U // 2, V // 2
     sc = config.sharpen
     sharp = centre
+    ch_views, ch_pos = _cross_hair_views(views)
+    ch_offsets = ch_pos - jnp.asarray([rc, cc], ch_pos.dtype)
+    if sc.shading_sigma > 0 and (sc.refine or sc.sweep_steps):
+        bias = shading_bias(
+            centre,
+            views[rc, cc],
+            ch_views,
+            ch_offsets,
+            sigma=sc.shading_sigma,
+            threshold=sc.shading_threshold,
+            floor=sc.shading_floor,
+            jump=sc.shading_jump,
+            edge_radius=sc.shading_edge_radius,
+        )
+        ch_views = remove_shading(ch_views, bias, centre, ch_offsets)
     if sc.refine:
-        ch_views, ch_pos = _cross_hair_views(views)
         rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
@@ -348,10 +369,11 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
         offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)
+        index = {tuple(p): k for k, p in enumerate(_cross_hair_positions(U, V).tolist())}
         sharp = photo_sweep(
             sharp,
             views[rc, cc],
-            views[pos[:, 0], pos[:, 1]],
+            ch_views[np.asarray([index[tuple(p)] for p in pos.tolist()])],
             offsets,
             steps=sc.sweep_steps,
             search=sc.sweep_search,
@@ -395,6 +417,9 @@ def sharpen(
     With ``config.sharpen.refine``: pixels next to depth discontinuities are snapped to the
     photo-consistent side with the cross-hair views (`photo_refine`; not in the thesis: it
     removes the foreground halos that labels on the wrong side of an occlusion edge leave).
+    With ``config.sharpen.shading_sigma > 0`` the cross-hair views of the snapping and the
+    plane sweep first lose their view-dependent shading (`shading_bias` estimated with
+    ``centre_disparity``, `remove_shading`; not in the thesis).
     With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
     its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
     ``config.sharpen.sweep_steps``: every pixel is corrected by a local plane sweep of
