@@ -5,7 +5,7 @@ Usage:
 
 SCENE: ``backgammon``, ``antinous`` (full resolution from ``$MVEDGE_DATA``), ``default`` (the
 synthetic default scene) or a synthetic variant (``textureless``, ``slanted``, ``thin``,
-``wide``; 9×9×128²); default: all of them. The default `PipelineConfig` is used throughout.
+``wide``, ``glossy``; 9×9×128²); default: all of them. The default `PipelineConfig` is used throughout.
 
 Regions of the centre view (from its ground truth and colour):
 
