@@ -21,6 +21,18 @@ def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
     return lo, hi
 
 
+def _sample_inside(disparity: Array, offset: Array) -> Array:
+    """``(H, W)`` bool: the sample of `backward_warp_planar` with ``disparity`` (of the
+    target view) and ``offset`` ``(dr, dc)`` falls inside the source view's frame."""
+    H, W = disparity.shape
+    ys, xs = jnp.meshgrid(
+        jnp.arange(H, dtype=disparity.dtype), jnp.arange(W, dtype=disparity.dtype), indexing="ij"
+    )
+    sx = xs - offset[1] * disparity
+    sy = ys - offset[0] * disparity
+    return (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
+
+
 def _aggregate(cost: Array, reference: Array, radius: int, sigma: float) -> Array:
     """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
     weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window)."""
@@ -176,15 +188,10 @@ def shading_bias(
     lo, hi = _window_extrema(disparity, 3)
     jumps = ((hi - lo) > jump).astype(disparity.dtype)
     interior = _window_extrema(jumps, edge_radius)[1] == 0 if edge_radius else jumps == 0
-    ys, xs = jnp.meshgrid(
-        jnp.arange(H, dtype=disparity.dtype), jnp.arange(W, dtype=disparity.dtype), indexing="ij"
-    )
 
     def residual(view, off):
         r = backward_warp_planar(view, disparity, off) - ref_planes  # (C, H, W)
-        sx = xs - off[1] * disparity
-        sy = ys - off[0] * disparity
-        inside = (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
+        inside = _sample_inside(disparity, off)
         small = sum(jnp.abs(r[c]) for c in range(C)) < threshold
         m = (inside & small & interior).astype(r.dtype)
         return jnp.concatenate([r * m[None], m[None]], axis=0)  # (C + 1, H, W)
@@ -247,18 +254,12 @@ def _photo_cost_planar(
     """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
     `backward_warp_planar`), so that callers looping over candidates transpose them once.
     A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation."""
-    H, W = candidate.shape
     ref_planes = jnp.moveaxis(reference, -1, -3)
-    ys, xs = jnp.meshgrid(
-        jnp.arange(H, dtype=candidate.dtype), jnp.arange(W, dtype=candidate.dtype), indexing="ij"
-    )
     use_ssim = not (isinstance(ssim, int | float) and ssim == 0)
 
     def diff(view, off):
         w = backward_warp_planar(view, candidate, off)
-        sx = xs - off[1] * candidate
-        sy = ys - off[0] * candidate
-        inside = (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
+        inside = _sample_inside(candidate, off)
         # A sum of channel slices: XLA's CPU reduction over a short axis is slow.
         cost = sum(jnp.abs(w[c] - ref_planes[c]) for c in range(w.shape[0]))
         if use_ssim:

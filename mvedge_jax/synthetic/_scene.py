@@ -172,7 +172,7 @@ def _texture(p, w, X, Y, dr=0.0, dc=0.0):
     pattern = (on1 ^ on2).astype(X.dtype)
     col = [col[i] + pattern * R[o + 8 + i] for i in range(3)]
     for m in range(N_SHADE):
-        q = 3 + 6 * N_MODES + 11 + 5 * m
+        q = o + 8 + 3 + 5 * m  # after the stripes and their colour
         shade = _sin(R[q] * X + R[q + 1] * Y + R[q + 2]) * (R[q + 3] * dc + R[q + 4] * dr)
         col = [c + shade for c in col]
     rgb = jnp.stack(col, axis=-1)
