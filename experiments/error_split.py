@@ -5,7 +5,8 @@ Usage:
 
 SCENE: ``backgammon``, ``antinous`` (full resolution from ``$MVEDGE_DATA``), ``default`` (the
 synthetic default scene) or a synthetic variant (``textureless``, ``slanted``, ``thin``,
-``wide``, ``glossy``; 9×9×128²); default: all of them. The default `PipelineConfig` is used throughout.
+``wide``, ``glossy``; 9×9×128²); default: all of them. The default `PipelineConfig` is used
+throughout.
 
 Regions of the centre view (from its ground truth and colour):
 
@@ -30,12 +31,16 @@ Stages, each a centre-view map (rows of the table):
    1.5 px from it on its side → diffusion / +sharpen.
 4. ``oracle``: `oracle_edges` (points from the colour gradient, GT labels and sides, GT
    depth-edge confidence) → diffusion / +sharpen: the interpolation ceiling.
+5. ``GT +sharpen``: the ground-truth map itself sharpened: what the sharpening costs a
+   perfect map.
 
 Reading the table: ``detected`` − ``GT labels`` is what label errors of the edge stage cost;
 ``detected`` − ``GT sides`` what wrong surface sides cost; ``oracle`` is what diffusion from
 edge samples achieves with a perfect edge model; the ``+sharpen`` and ``+propagate`` rows
-show what those steps add or remove. Also printed: the share of visible edge points whose
-label is off by more than 0.07 (and 0.3) from the GT on their side.
+show what those steps add or remove; where ``GT +sharpen`` is about as high as a
+``+sharpen`` row, or higher, the sharpening, not its input, sets that score. Also printed:
+the share of visible edge points whose label is off by more than 0.07 (and 0.3) from the GT
+on their side.
 """
 
 from __future__ import annotations
@@ -205,6 +210,7 @@ def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
         c = np.asarray(diffuse_centre(views, e, s, rcfg))
         maps[label] = c
         maps[f"{label} +sharpen"] = np.asarray(sharpen(views, c, rcfg))
+    maps["GT +sharpen"] = np.asarray(sharpen(views, jnp.asarray(gt), rcfg))
     rows = {}
     for stage, m in maps.items():
         row = {r: depth_metrics(m, gt, masks[r])["mse_x100"] for r in REGIONS}
