@@ -86,6 +86,10 @@ class SharpenConfig(eqx.Module):
             scale with it).
         sweep_margin: (threshold) relative cost advantage over the pixel's own value that a
             plane-sweep move needs (`photo_sweep`'s ``margin``; 0 = none).
+        sweep_support_jump: (threshold) depth-aware support of the sweep's cost
+            aggregation: window pixels whose disparity differs from the pixel's by more
+            than this (pixels per view step) do not count (`photo_sweep`'s
+            ``support_jump``; a value above the scene's disparity range switches it off).
         shading_threshold: (threshold) largest colour difference (L1 over the channels) of
             a pixel that enters the shading estimate (`shading_bias`'s ``threshold``).
         shading_floor: (threshold) soft threshold of the shading estimate, colour units per
@@ -164,6 +168,7 @@ class SharpenConfig(eqx.Module):
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
+    sweep_support_jump: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     shading_threshold: Array = hyperparameter(0.015, differentiable=False, lower=0.0)
     shading_floor: Array = hyperparameter(1e-4, differentiable=False, lower=0.0)
     shading_jump: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
@@ -180,7 +185,7 @@ class SharpenConfig(eqx.Module):
     refine_aggregate: int = static(2, lower=0, upper=64)
     sweep_steps: int = static(9, lower=0, upper=101)
     sweep_ssim: float = static(0.0, lower=0.0)
-    sweep_aggregate: int = static(2, lower=0, upper=64)
+    sweep_aggregate: int = static(4, lower=0, upper=64)
     sweep_min_offset: int = static(2, lower=1, upper=64)
     shading_sigma: float = static(16.0, lower=0.0)
     shading_edge_radius: int = static(4, lower=0, upper=64)

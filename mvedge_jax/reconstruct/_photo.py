@@ -33,9 +33,18 @@ def _sample_inside(disparity: Array, offset: Array) -> Array:
     return (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
 
 
-def _aggregate(cost: Array, reference: Array, radius: int, sigma: float) -> Array:
+def _aggregate(
+    cost: Array,
+    reference: Array,
+    radius: int,
+    sigma: float,
+    disparity: Array | None = None,
+    support_jump: float | Array | None = None,
+) -> Array:
     """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
-    weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window)."""
+    weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window).
+    With ``disparity`` ``(H, W)`` and ``support_jump``, a window pixel ``q`` supports ``p``
+    only where ``|d_q − d_p| ≤ support_jump``."""
     if radius == 0:
         return cost
     H, W = reference.shape[:2]
@@ -46,6 +55,8 @@ def _aggregate(cost: Array, reference: Array, radius: int, sigma: float) -> Arra
     finite_p = jnp.isfinite(cost_p)
     cost_p = jnp.where(finite_p, cost_p, 0.0)
     finite_p = finite_p.astype(cost.dtype)
+    if disparity is not None:
+        disparity_p = jnp.pad(disparity, pad, mode="edge")
     num = jnp.zeros_like(cost_p[:, :H, :W])
     den = jnp.zeros_like(num)
     # Static unrolled loop over the window offsets (slices of the padded arrays): XLA fuses it
@@ -54,6 +65,9 @@ def _aggregate(cost: Array, reference: Array, radius: int, sigma: float) -> Arra
         for b in range(2 * r + 1):
             g = ref_p[a : a + H, b : b + W]
             w = jnp.exp(-jnp.sum((g - reference) ** 2, axis=-1) / (2 * sigma * sigma))
+            if disparity is not None:
+                jump = jnp.abs(disparity_p[a : a + H, b : b + W] - disparity)
+                w = jnp.where(jump <= support_jump, w, 0.0)
             f = finite_p[:, a : a + H, b : b + W]
             num = num + w[None] * cost_p[:, a : a + H, b : b + W] * f
             den = den + w[None] * f
@@ -249,11 +263,22 @@ def remove_shading(
 
 
 def _photo_cost_planar(
-    candidate, reference, planes, offsets, aggregate, sigma, ssim=0.0, *, weights=None
+    candidate,
+    reference,
+    planes,
+    offsets,
+    aggregate,
+    sigma,
+    ssim=0.0,
+    *,
+    weights=None,
+    support_jump=None,
 ):
     """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
     `backward_warp_planar`), so that callers looping over candidates transpose them once.
-    A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation."""
+    A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation. With
+    ``support_jump``, the aggregation only averages over window pixels whose ``candidate``
+    is within ``support_jump`` of the pixel's (`_aggregate`)."""
     ref_planes = jnp.moveaxis(reference, -1, -3)
     use_ssim = not (isinstance(ssim, int | float) and ssim == 0)
 
@@ -276,7 +301,10 @@ def _photo_cost_planar(
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
     means = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
-    means = _aggregate(means, reference, aggregate, sigma)
+    if support_jump is None:
+        means = _aggregate(means, reference, aggregate, sigma)
+    else:
+        means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump)
     return jnp.min(means, axis=0)
 
 
@@ -434,6 +462,7 @@ def photo_sweep(
     sigma: float | Array = 0.1,
     ssim: float | Array = 0.0,
     margin: float | Array = 0.0,
+    support_jump: float | Array | None = None,
 ) -> Float[Array, "H W"]:
     """Sub-pixel photo-consistent correction of a disparity map by a local plane sweep.
 
@@ -466,6 +495,13 @@ def photo_sweep(
             middle hypothesis). With ``margin > 0`` a pixel whose own value is the best
             hypothesis keeps it (no vertex step), and cost differences at the level of the
             noise move nothing. 0: no test.
+        support_jump: depth-aware support of the aggregation (pixels per view step): a
+            window pixel counts for a pixel only where their input disparities differ by at
+            most this (every hypothesis shifts the whole map by the same ``δ``, so the
+            input's differences are the hypotheses'). Keeps the cost of a pixel near a
+            depth discontinuity to its own surface, so that larger windows (less noise on
+            faint texture) do not drag it towards the other side. None: every window pixel
+            counts (colour weights only).
 
     Returns:
         ``(H, W)`` corrected disparity, changed by at most ``search`` per pixel.
@@ -484,7 +520,14 @@ def photo_sweep(
     unit = jnp.linspace(-1.0, 1.0, steps, dtype=disparity.dtype)
     costs = lax.map(
         lambda u: _photo_cost_planar(
-            disparity + u * search, reference, planes, offsets, aggregate, sigma, ssim
+            disparity + u * search,
+            reference,
+            planes,
+            offsets,
+            aggregate,
+            sigma,
+            ssim,
+            support_jump=support_jump,
         ),
         unit,
     )  # (steps, H, W)

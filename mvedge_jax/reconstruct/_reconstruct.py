@@ -380,6 +380,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             aggregate=sc.sweep_aggregate,
             ssim=sc.sweep_ssim,
             margin=sc.sweep_margin,
+            support_jump=sc.sweep_support_jump,
         )
     slope = None
     if sc.enabled and sc.wmf_slope_baseline > 0:
