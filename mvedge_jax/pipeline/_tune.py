@@ -185,7 +185,11 @@ def tune(
     directly. After every step each field is projected onto its bounds, so the returned
     configuration is always valid. A step whose loss or gradient is not finite is skipped. Use
     `smooth_config` for ``edges.label.temperature`` and ``reconstruct.sharpen.wmf_sigma``, in
-    which the default (hard) chain is piecewise constant. The gradient is compiled once per
+    which the default (hard) chain is piecewise constant. The chain's selections (boundary
+    snapping, matte, the plane sweep's choice of hypothesis) stay: the loss is piecewise
+    smooth, so a large step can cross choices that raise it; the sweep's hypotheses move
+    with the centre map and make the most of these jumps (``reconstruct.sharpen.sweep_steps
+    = 0`` removes them). The gradient is compiled once per
     scene shape, static configuration, set of ``fields`` and ``loss``, and reused by every
     step and by later calls (new starting values, learning rates or step counts do not
     recompile); the values are traced.

@@ -38,7 +38,10 @@ RTOL = 1e-3
 def _tight(config: PipelineConfig) -> PipelineConfig:
     """Solvers to a 1e-12 residual; a test point where every field acts smoothly (anti-aliased
     bank, λ_e clipped for some points, splat offsets off the pixel grid, photo-consistent
-    samples of the centre diffusion close enough to the labels to exist in a 32² view)."""
+    samples of the centre diffusion close enough to the labels to exist in a 32² view, no
+    reprojected pixel's photometric confidence within the finite-difference step of the
+    cross-hair threshold ``epi.min_confidence``: at the default 0.1 one is, and
+    ``epi.photo_sigma`` ± 1e-7 flips it)."""
     tight = SolverConfig(rtol=1e-12, max_iters=5000)
     tight_j = SolverConfig(preconditioner="jacobi", rtol=1e-12, max_iters=20000)
     return with_values(
@@ -50,6 +53,7 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
             "reconstruct.centre.offset_scale": 0.93,
             "reconstruct.centre.solver": tight,
             "reconstruct.seeds.min_distance": 2,
+            "reconstruct.epi.min_confidence": 0.12,
             "reconstruct.epi.solver": tight_j,
             "reconstruct.fill.solver": tight_j,
         },

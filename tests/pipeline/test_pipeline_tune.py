@@ -19,6 +19,7 @@ from mvedge_jax.pipeline import (
     replace_paths,
     smooth_config,
     tune,
+    with_values,
 )
 from mvedge_jax.synthetic import make_scene
 
@@ -41,8 +42,11 @@ def scenes():
 
 
 def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
-    # `smooth_config`: the configuration `tune` is documented for (no hard selections).
-    config = smooth_config()
+    # `smooth_config`: the configuration `tune` is documented for, without the plane sweep,
+    # whose choice of hypothesis moves with the centre map: with it the loss of this scene
+    # jumps between Adam's steps (measured 0.0517 → 0.0539 → 0.0518 → 0.0520 at this
+    # learning rate), without it it falls at every step.
+    config = with_values(smooth_config(), {"reconstruct.sharpen.sweep_steps": 0})
     fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
     seen = []
     tuned, hist = tune(
