@@ -162,7 +162,7 @@ class SharpenConfig(eqx.Module):
     wmf_sigma: Array = hyperparameter(0.05, differentiable=True, lower=0.0, lower_open=True)
     refine_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
-    refine_near_weight: Array = hyperparameter(1.0, differentiable=False, lower=0.0)
+    refine_near_weight: Array = hyperparameter(2.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
