@@ -43,8 +43,8 @@ def _aggregate(
 ) -> Array:
     """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
     weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window).
-    With ``disparity`` ``(H, W)`` and ``support_jump``, a window pixel ``q`` supports ``p``
-    only where ``|d_q − d_p| ≤ support_jump``."""
+    With ``support_jump`` (and ``disparity`` ``(H, W)``), a window pixel ``q`` supports
+    ``p`` only where ``|d_q − d_p| ≤ support_jump``."""
     if radius == 0:
         return cost
     H, W = reference.shape[:2]
@@ -55,7 +55,7 @@ def _aggregate(
     finite_p = jnp.isfinite(cost_p)
     cost_p = jnp.where(finite_p, cost_p, 0.0)
     finite_p = finite_p.astype(cost.dtype)
-    if disparity is not None:
+    if support_jump is not None:
         disparity_p = jnp.pad(disparity, pad, mode="edge")
     num = jnp.zeros_like(cost_p[:, :H, :W])
     den = jnp.zeros_like(num)
@@ -65,7 +65,7 @@ def _aggregate(
         for b in range(2 * r + 1):
             g = ref_p[a : a + H, b : b + W]
             w = jnp.exp(-jnp.sum((g - reference) ** 2, axis=-1) / (2 * sigma * sigma))
-            if disparity is not None:
+            if support_jump is not None:
                 jump = jnp.abs(disparity_p[a : a + H, b : b + W] - disparity)
                 w = jnp.where(jump <= support_jump, w, 0.0)
             f = finite_p[:, a : a + H, b : b + W]
@@ -301,10 +301,7 @@ def _photo_cost_planar(
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
     means = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
-    if support_jump is None:
-        means = _aggregate(means, reference, aggregate, sigma)
-    else:
-        means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump)
+    means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump)
     return jnp.min(means, axis=0)
 
 
