@@ -81,6 +81,10 @@ class SharpenConfig(eqx.Module):
             background colours differ by at least this (guide units).
         matte_impure_weight: (threshold) weight of window pixels on a discontinuity in the colour
             means.
+        matte_max_residual: (threshold) `boundary_matte` decides only where the pixel's
+            colour lies within this squared distance of the line through the foreground and
+            background colours, relative to their squared distance (its ``max_residual``;
+            dimensionless; a large value switches the test off).
         sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
             view step. Smooth where the chosen hypothesis does not change (the hypotheses
             scale with it).
@@ -166,6 +170,7 @@ class SharpenConfig(eqx.Module):
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
+    matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
     sweep_support_jump: Array = hyperparameter(0.1, differentiable=False, lower=0.0)

@@ -18,6 +18,7 @@ def boundary_matte(
     spatial_sigma: float = 1.0,
     impure_weight: float | Array = 0.05,
     min_separation: float | Array = 0.1,
+    max_residual: float | Array = float("inf"),
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -39,7 +40,10 @@ def boundary_matte(
     neighbours is on the chosen side (where three surfaces meet, the window's mean
     background can resemble the foreground colour). Unchanged: pixels off every discontinuity,
     pixels whose ``F`` and ``B`` differ by less than ``min_separation`` (guide units) or
-    whose window lacks one of the two sides, and near-ties ``|α − 1/2| ≤ 10⁻³``. One pass;
+    whose window lacks one of the two sides, pixels whose colour lies off the line through
+    ``B`` and ``F`` by more than ``max_residual`` (squared distance ``|c − B − α (F − B)|²``
+    relative to ``|F − B|²``: a third colour the two-colour model does not explain, as
+    between fine repeated structures), and near-ties ``|α − 1/2| ≤ 10⁻³``. One pass;
     jit/vmap-able. Not differentiable in the side chosen (a selection); the output is
     piecewise a weighted mean of the input.
 
@@ -57,6 +61,8 @@ def boundary_matte(
         spatial_sigma: Gaussian distance scale of the colour means, pixels (static float).
         impure_weight: weight (in [0, 1]) of window pixels that lie on a discontinuity.
         min_separation: minimum colour distance ``|F − B|`` (guide units) to decide.
+        max_residual: largest squared distance of the pixel's colour from the ``B``–``F``
+            line, relative to ``|F − B|²`` (dimensionless), to decide; ``inf`` = no test.
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -114,6 +120,9 @@ def boundary_matte(
     # Near-ties (alpha ~ 1/2, e.g. an edge through the centre of a pixel) keep their value,
     # so that rounding differences cannot flip a decision.
     decide = band & (wf > 0) & (wb > 0) & (sep2 > min_separation**2) & (jnp.abs(alpha - 0.5) > 1e-3)
+    # Two-colour model test: the pixel's colour must lie near the line through B and F.
+    off_line = g - B - alpha[..., None] * sep
+    decide = decide & (jnp.sum(off_line * off_line, axis=-1) <= max_residual * sep2)
     is_fg = d > mid
     d_f = df / jnp.maximum(wf, tiny)
     d_b = db / jnp.maximum(wb, tiny)

@@ -313,6 +313,7 @@ def _matte(d: Array, guide: Array, config: ReconstructConfig) -> Array:
         spatial_sigma=sc.matte_sigma,
         impure_weight=sc.matte_impure_weight,
         min_separation=sc.matte_min_separation,
+        max_residual=sc.matte_max_residual,
     )
 
 

@@ -67,6 +67,24 @@ def test_matte_leaves_smooth_maps_and_flat_colours_alone():
     np.testing.assert_array_equal(np.asarray(out), d)
 
 
+def test_matte_leaves_colours_off_the_two_colour_line_alone():
+    gt, img = _edge_scene(10.3)
+    d = np.roll(gt, 1, axis=1)  # column 11 fattened: foreground over a pure background pixel
+    d[:, :2], d[:, -2:] = FG, BG
+    third = img.copy()
+    # A colour perpendicular to F - B from the background's: alpha stays 0, the residual
+    # |c - B - alpha (F - B)|^2 / |F - B|^2 is 0.65 / 1.14.
+    third[:, 11] += np.array([0.1, 0.8, 0.0], np.float32)
+    decided = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(third)))
+    np.testing.assert_allclose(decided[:, 11], BG)
+    kept = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(third), max_residual=0.5))
+    np.testing.assert_allclose(kept[:, 11], FG)
+    np.testing.assert_allclose(kept[:, :11], gt[:, :11])
+    # Mixtures of the two colours lie on the line: the test leaves those decisions alone.
+    tested = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img), max_residual=0.01))
+    np.testing.assert_allclose(tested, gt, atol=1e-5)
+
+
 def test_matte_vmaps_over_views():
     gts, imgs = zip(*(_edge_scene(e) for e in (10.2, 10.8)), strict=True)
     d = jnp.asarray(np.stack([np.roll(g, 1, axis=1) for g in gts]))
