@@ -27,6 +27,7 @@ from ._photo import shading_bias as shading_bias
 from ._reconstruct import Reconstruction as Reconstruction
 from ._reconstruct import background_fill as background_fill
 from ._reconstruct import centre_seeds as centre_seeds
+from ._reconstruct import colour_fill as colour_fill
 from ._reconstruct import contradicted_by_centre as contradicted_by_centre
 from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct

@@ -69,21 +69,25 @@ class Reconstruction(eqx.Module):
     solver_residual: dict[str, Float[Array, ""]] = eqx.field(default_factory=dict)
 
 
-def _nearest_along(values: Array, valid: Array, axis: int, reverse: bool) -> tuple[Array, Array]:
-    """Value of the nearest valid pixel before (or after, ``reverse``) each pixel on an axis."""
-    n = values.shape[axis]
-    shape = [1] * values.ndim
+def _nearest_index(valid: Array, axis: int, reverse: bool) -> tuple[Array, Array]:
+    """Index of the nearest valid pixel before (or after, ``reverse``) each pixel on an axis
+    (clipped into range) and whether there is one."""
+    n = valid.shape[axis]
+    shape = [1] * valid.ndim
     shape[axis] = n
     idx = jnp.arange(n, dtype=jnp.int32).reshape(shape)
     if reverse:
-        cand = jnp.where(valid, idx, n)
-        near = lax.cummin(cand, axis=axis, reverse=True)
+        near = lax.cummin(jnp.where(valid, idx, n), axis=axis, reverse=True)
         found = near < n
     else:
-        cand = jnp.where(valid, idx, -1)
-        near = lax.cummax(cand, axis=axis)
+        near = lax.cummax(jnp.where(valid, idx, -1), axis=axis)
         found = near >= 0
-    near = jnp.clip(near, 0, n - 1)
+    return jnp.clip(near, 0, n - 1), found
+
+
+def _nearest_along(values: Array, valid: Array, axis: int, reverse: bool) -> tuple[Array, Array]:
+    """Value of the nearest valid pixel before (or after, ``reverse``) each pixel on an axis."""
+    near, found = _nearest_index(valid, axis, reverse)
     return jnp.take_along_axis(values, near, axis=axis), found
 
 
@@ -181,6 +185,61 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     return lax.map(one, (filled, conf, valid, rows, cols))
 
 
+def colour_fill(
+    values: Float[ArrayLike, "H W"], valid: Bool[ArrayLike, "H W"], guide: Float[ArrayLike, "H W C"]
+) -> Float[Array, "H W"]:
+    """Fill holes from the nearest valid value left, right, above or below whose pixel has
+    the colour closest to the hole pixel's own.
+
+    Of the (up to) four nearest valid pixels along the rows and columns, the one whose
+    ``guide`` colour is nearest (L1 over the channels) to the hole pixel's ``guide`` colour
+    gives its value; among equally near colours the farthest (smallest) value wins. The hole
+    shows the surface that its colour matches, which a disocclusion behind a nearer surface
+    need not share with the farthest neighbour (`background_fill`). Pixels with no valid
+    value on any of the four rays stay 0. jit/vmap-able; piecewise a selection of the input
+    values (differentiable in them, not in the choice).
+
+    Args:
+        values: ``(H, W)`` disparity (pixels per view step), meaningful where ``valid``.
+        valid: ``(H, W)`` bool, the pixels that keep their value.
+        guide: ``(H, W, C)`` colour of the same view (e.g. its `colour_guide`).
+
+    Returns:
+        ``(H, W)`` filled disparity, the dtype of ``values``.
+
+    Raises:
+        ValueError: on a non-2-D ``values``, or ``valid`` / ``guide`` of another ``(H, W)``.
+
+    References:
+        Not in the thesis (its angular inpainting leaves disocclusions to the EPI solve,
+        Sec. 6.1, eqs 6.4–6.8).
+    """
+    values = jnp.asarray(values)
+    valid = jnp.asarray(valid, bool)
+    guide = jnp.asarray(guide, values.dtype)
+    if values.ndim != 2:
+        raise ValueError(f"values must have shape (H, W); got {tuple(values.shape)}")
+    if valid.shape != values.shape or guide.ndim != 3 or guide.shape[:2] != values.shape:
+        raise ValueError(
+            f"valid must have shape {values.shape} and guide {values.shape + ('C',)}; got "
+            f"{tuple(valid.shape)} and {tuple(guide.shape)}"
+        )
+    big = jnp.asarray(jnp.inf, values.dtype)
+    best_dist = jnp.full(values.shape, big)
+    best = jnp.full(values.shape, big)
+    for axis in (0, 1):
+        for reverse in (False, True):
+            near, found = _nearest_index(valid, axis, reverse)
+            v = jnp.take_along_axis(values, near, axis=axis)
+            g = jnp.take_along_axis(guide, near[..., None], axis=axis)
+            dist = jnp.where(found, jnp.sum(jnp.abs(g - guide), axis=-1), big)
+            better = found & ((dist < best_dist) | ((dist == best_dist) & (v < best)))
+            best_dist = jnp.where(better, dist, best_dist)
+            best = jnp.where(better, v, best)
+    best = jnp.where(jnp.isfinite(best), best, 0.0)
+    return jnp.where(valid, values, best)
+
+
 def contradicted_by_centre(
     candidate: Float[Array, "H W"],
     centre: Float[Array, "H W"],
@@ -230,13 +289,17 @@ def contradicted_by_centre(
 
 
 def _cross_hair_fill(
-    maps, valid, conf, centre: int, offsets, centre_map, config: ReconstructConfig
+    maps, valid, conf, centre: int, offsets, centre_map, guides, config: ReconstructConfig
 ):
     """``config.epi.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
     projection's ``valid`` and photometric confidence; entry ``centre`` is kept.
-    ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map."""
+    ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map;
+    ``guides`` ``(K, H, W, C)``: the views' colour guides."""
     ok = valid & (conf > config.epi.min_confidence)
-    view_bg = jax.vmap(background_fill)(maps, ok)
+    if config.epi.fill_choice == "colour":
+        view_bg = jax.vmap(colour_fill)(maps, ok, guides)
+    else:
+        view_bg = jax.vmap(background_fill)(maps, ok)
     farther = jnp.minimum(maps, view_bg)
     fallback = jnp.where(ok, maps, farther)
     if config.epi.visibility_fill:
@@ -632,8 +695,8 @@ def _propagate(
     cross_h = jnp.transpose(eh.x, (1, 0, 2))  # (V, H, W)
     cross_v = jnp.transpose(ev.x, (1, 2, 0))  # (U, H, W)
     if config.epi.cross_hair_fill:
-        cross_h = _cross_hair_fill(cross_h, vh, ch, cc, off_h, centre, config)
-        cross_v = _cross_hair_fill(cross_v, vv, cv, rc, off_v, centre, config)
+        cross_h = _cross_hair_fill(cross_h, vh, ch, cc, off_h, centre, guides[rc], config)
+        cross_v = _cross_hair_fill(cross_v, vv, cv, rc, off_v, centre, guides[:, cc], config)
     rows, cols = np.nonzero((np.arange(U)[:, None] != rc) & (np.arange(V)[None, :] != cc))
     disparity = jnp.zeros((U, V, H, W), cross_h.dtype)
     disparity = disparity.at[rc, :].set(cross_h)
@@ -695,7 +758,8 @@ def propagate(
        `solve_poisson` per direction. Reprojected pixels whose colour does not match
        (photometric confidence ≤ ``epi.min_confidence``) count as holes. With
        ``config.epi.cross_hair_fill``, the holes of each cross-hair view then take the
-       farther of their inpainted value and the view's 2-D `background_fill`.
+       farther of their inpainted value and the view's 2-D fill (`colour_fill`, or
+       `background_fill` with ``epi.fill_choice = "farthest"``).
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
@@ -768,7 +832,8 @@ def reconstruct(
        ``epi.c / (|∇I_EPI| + epi.eps)``; one batched `solve_poisson` per direction.
        Reprojected pixels whose colour does not match count as holes; with
        ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the farther of
-       the inpainted value and the view's 2-D `background_fill`.
+       the inpainted value and the view's 2-D fill (`colour_fill`, or `background_fill`
+       with ``epi.fill_choice = "farthest"``).
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and low-confidence pixels filled

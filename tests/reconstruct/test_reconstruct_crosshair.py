@@ -11,6 +11,7 @@ from mvedge_jax.reconstruct import (
     EpiConfig,
     ReconstructConfig,
     background_fill,
+    colour_fill,
     inpaint_epis,
     photometric_confidence,
     project_cross_hair,
@@ -121,3 +122,50 @@ def test_background_fill_prefers_the_farther_side():
     v = jnp.asarray([[2.0, 2.0, 0.0, 0.0, -1.0, -1.0]])
     ok = jnp.asarray([[True, True, False, False, True, True]])
     np.testing.assert_allclose(background_fill(v, ok), [[2.0, 2.0, -1.0, -1.0, -1.0, -1.0]])
+
+
+def _hidden_square_view():
+    """Far background (d = -1, blue) on row 0; below it a mid-depth square (d = 1, yellow) on
+    the left and a near surface (d = 3, red) on the right, with a yellow hole between them:
+    the part of the square that the near surface hid in the centre view."""
+    blue, yellow, red = (0.1, 0.2, 0.9), (0.9, 0.8, 0.1), (0.8, 0.1, 0.1)
+    v = np.full((5, 6), -1.0, np.float32)
+    g = np.empty((5, 6, 3), np.float32)
+    g[:] = blue
+    v[1:, :2], g[1:, :2] = 1.0, yellow
+    v[1:, 2:4], g[1:, 2:4] = 0.0, yellow
+    v[1:, 4:], g[1:, 4:] = 3.0, red
+    ok = np.ones((5, 6), bool)
+    ok[1:, 2:4] = False
+    return v, ok, g
+
+
+def test_colour_fill_takes_the_surface_the_hole_shows():
+    v, ok, g = _hidden_square_view()
+    out = np.asarray(jax.jit(colour_fill)(v, ok, g))
+    np.testing.assert_array_equal(out[ok], v[ok])
+    np.testing.assert_allclose(out[1:, 2:4], 1.0)  # the square, by colour
+    # The farthest neighbour is the background above the square.
+    np.testing.assert_allclose(np.asarray(background_fill(jnp.asarray(v), ok))[1:, 2:4], -1.0)
+
+
+def test_colour_fill_breaks_colour_ties_towards_the_farthest():
+    rng = np.random.default_rng(0)
+    v = rng.uniform(-2, 2, (12, 9)).astype(np.float32)
+    ok = rng.random((12, 9)) > 0.6
+    flat = np.full((12, 9, 3), 0.5, np.float32)
+    np.testing.assert_allclose(
+        colour_fill(v, ok, flat), background_fill(jnp.asarray(v), jnp.asarray(ok))
+    )
+    stack = jax.vmap(colour_fill)(jnp.stack([v, v]), jnp.stack([ok, ok]), jnp.stack([flat, flat]))
+    np.testing.assert_allclose(stack[1], background_fill(jnp.asarray(v), jnp.asarray(ok)))
+
+
+def test_colour_fill_rejects_bad_shapes():
+    v, ok, g = _hidden_square_view()
+    with pytest.raises(ValueError, match="values must have shape"):
+        colour_fill(v[None], ok, g)
+    with pytest.raises(ValueError, match="guide"):
+        colour_fill(v, ok, g[:3])
+    with pytest.raises(ValueError, match="valid"):
+        colour_fill(v, ok[:3], g)
