@@ -338,11 +338,11 @@ class EpiConfig(eqx.Module):
             the frame on a surface that is not nearer, so the centre would have projected
             it here). Otherwise it takes the nearest of three candidates that the centre
             view does not contradict: the inpainted value, the view's 2-D fill
-            (``fill_choice``), and the farther of the nearest projected values of the same pixel in the
-            cross-hair views before and after it. This mainly fixes the strips along the
-            frame where content from outside the centre view's frame enters a view: there
-            the inpainting and the 2-D fill see only the surface beside the strip, often a
-            nearer one.
+            (``fill_choice``), and the farther of the nearest projected values of the same
+            pixel in the cross-hair views before and after it. This mainly fixes the strips
+            along the frame where content from outside the centre view's frame enters a
+            view: there the inpainting and the 2-D fill see only the surface beside the
+            strip, often a nearer one.
         solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
             Jacobi preconditioner is much faster than the batched multigrid).
 
