@@ -62,8 +62,12 @@ def test_frame_strip_takes_the_surface_from_outside(visibility):
     maps = jnp.where(vv, pv, 1.0).at[U // 2].set(centre)
     offsets = jnp.stack([jnp.arange(U) - U // 2, jnp.zeros(U)], axis=1).astype(jnp.float32)
     config = dataclasses.replace(ReconstructConfig(), epi=EpiConfig(visibility_fill=visibility))
+    # Flat colours: the fill's colour choice ties and takes the farthest value.
+    guides = jnp.full(maps.shape + (3,), 0.5)
     out = np.asarray(
-        _cross_hair_fill(maps, vv, jnp.ones_like(maps), U // 2, offsets, centre, config)
+        _cross_hair_fill(
+            maps, vv, jnp.ones_like(maps), U // 2, offsets, centre, guides, config
+        )
     )
     np.testing.assert_array_equal(out[U // 2], np.asarray(centre))
     np.testing.assert_array_equal(out[4, 2:10], np.asarray(pv)[4, 2:10])
