@@ -9,9 +9,13 @@ from pathlib import Path
 import jax
 import pytest
 
-# Persistent compilation cache: repeated test runs do not recompile.
+# Persistent compilation cache: repeated test runs do not recompile. One folder per
+# pytest-xdist worker: JAX writes an entry in place, without a lock unless the cache has a size
+# cap, so one worker could read an entry that the other is still writing.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "main")
 jax.config.update(
-    "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache")
+    "jax_compilation_cache_dir",
+    str(Path(__file__).resolve().parents[1] / ".jax_cache" / f"tests-{_WORKER}"),
 )
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
