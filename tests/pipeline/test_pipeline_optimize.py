@@ -110,7 +110,7 @@ def test_residual_diffusion_starts_from_the_initial_map(api_run):
 
 def test_optimize_decreases_the_loss_and_stays_accurate(api_run):
     """Measured on this scene (2026-11-25, 3 steps of ``TINY``): loss 0.01801 → 0.01786
-    (×0.992); centre MSE×100 1.302 (Ch. 6) → 1.071, worst view 1.72 → 1.35. Bounds are
+    (×0.992); centre MSE×100 1.302 (Ch. 6) → 1.071, worst view 1.60 → 1.33. Bounds are
     regression guards."""
     lf, res, new, info, _ = api_run
     loss = np.asarray(info["loss_history"])
