@@ -33,34 +33,24 @@ def _sample_inside(disparity: Array, offset: Array) -> Array:
     return (sx >= 0) & (sx <= W - 1) & (sy >= 0) & (sy <= H - 1)
 
 
-def _aggregate(
-    cost: Array,
+def _support_weights(
     reference: Array,
     radius: int,
-    sigma: float,
+    sigma: float | Array,
     disparity: Array | None = None,
     support_jump: float | Array | None = None,
 ) -> Array:
-    """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
-    weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window).
-    With ``support_jump`` (and ``disparity`` ``(H, W)``), a window pixel ``q`` supports
-    ``p`` only where ``|d_q − d_p| ≤ support_jump``."""
-    if radius == 0:
-        return cost
+    """Adaptive support weights of `_aggregate`, one ``(H, W)`` plane per window offset
+    (row-major over ``(2 radius + 1)²``): ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference
+    (edge-padded), times ``|d_q − d_p| ≤ support_jump`` when ``support_jump`` is given.
+    Callers that aggregate several costs with the same weights compute them once."""
     H, W = reference.shape[:2]
     r = radius
     pad = ((r, r), (r, r))
     ref_p = jnp.pad(reference, pad + ((0, 0),), mode="edge")
-    cost_p = jnp.pad(cost, ((0, 0),) + pad, mode="edge")
-    finite_p = jnp.isfinite(cost_p)
-    cost_p = jnp.where(finite_p, cost_p, 0.0)
-    finite_p = finite_p.astype(cost.dtype)
     if support_jump is not None:
         disparity_p = jnp.pad(disparity, pad, mode="edge")
-    num = jnp.zeros_like(cost_p[:, :H, :W])
-    den = jnp.zeros_like(num)
-    # Static unrolled loop over the window offsets (slices of the padded arrays): XLA fuses it
-    # into one pass instead of materialising a (window, G, H, W) stack.
+    planes = []
     for a in range(2 * r + 1):
         for b in range(2 * r + 1):
             g = ref_p[a : a + H, b : b + W]
@@ -68,6 +58,45 @@ def _aggregate(
             if support_jump is not None:
                 jump = jnp.abs(disparity_p[a : a + H, b : b + W] - disparity)
                 w = jnp.where(jump <= support_jump, w, 0.0)
+            planes.append(w)
+    return jnp.stack(planes)
+
+
+def _aggregate(
+    cost: Array,
+    reference: Array,
+    radius: int,
+    sigma: float,
+    disparity: Array | None = None,
+    support_jump: float | Array | None = None,
+    weights: Array | None = None,
+) -> Array:
+    """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
+    weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window).
+    With ``support_jump`` (and ``disparity`` ``(H, W)``), a window pixel ``q`` supports
+    ``p`` only where ``|d_q − d_p| ≤ support_jump``. ``weights``: the `_support_weights`
+    of these arguments, precomputed (then ``reference``, ``sigma``, ``disparity`` and
+    ``support_jump`` are not used)."""
+    if radius == 0:
+        return cost
+    H, W = cost.shape[-2:]
+    r = radius
+    pad = ((r, r), (r, r))
+    cost_p = jnp.pad(cost, ((0, 0),) + pad, mode="edge")
+    finite_p = jnp.isfinite(cost_p)
+    cost_p = jnp.where(finite_p, cost_p, 0.0)
+    finite_p = finite_p.astype(cost.dtype)
+    if weights is None:
+        weights = _support_weights(reference, radius, sigma, disparity, support_jump)
+    num = jnp.zeros_like(cost_p[:, :H, :W])
+    den = jnp.zeros_like(num)
+    # Static unrolled loop over the window offsets (slices of the padded arrays): XLA fuses it
+    # into one pass instead of materialising a (window, G, H, W) stack.
+    k = 0
+    for a in range(2 * r + 1):
+        for b in range(2 * r + 1):
+            w = weights[k]
+            k += 1
             f = finite_p[:, a : a + H, b : b + W]
             num = num + w[None] * cost_p[:, a : a + H, b : b + W] * f
             den = den + w[None] * f
@@ -273,12 +302,15 @@ def _photo_cost_planar(
     *,
     weights=None,
     support_jump=None,
+    support=None,
 ):
     """`photo_cost` with the views channels first (``planes (K, C, H, W)``; see
     `backward_warp_planar`), so that callers looping over candidates transpose them once.
     A concrete ``ssim == 0`` leaves the SSIM term out of the traced computation. With
     ``support_jump``, the aggregation only averages over window pixels whose ``candidate``
-    is within ``support_jump`` of the pixel's (`_aggregate`)."""
+    is within ``support_jump`` of the pixel's (`_aggregate`). ``support``: the
+    aggregation's `_support_weights`, precomputed by callers that evaluate several
+    candidates with the same weights (then ``support_jump`` is not used)."""
     ref_planes = jnp.moveaxis(reference, -1, -3)
     use_ssim = not (isinstance(ssim, int | float) and ssim == 0)
 
@@ -301,7 +333,7 @@ def _photo_cost_planar(
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
     means = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
-    means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump)
+    means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump, support)
     return jnp.min(means, axis=0)
 
 
@@ -352,6 +384,9 @@ def photo_refine(
     planes = jnp.moveaxis(views, -1, -3)
     near = jnp.max(jnp.abs(jnp.asarray(offsets)), axis=-1) <= 1
     weights = jnp.where(near, jnp.asarray(near_weight, planes.dtype), jnp.ones((), planes.dtype))
+    # The colour weights of the aggregation do not depend on the candidate: once for all
+    # passes and candidates.
+    support = _support_weights(reference, aggregate, sigma) if aggregate else None
 
     def one(_, d):
         lo, hi = _window_extrema(d, radius)
@@ -359,7 +394,7 @@ def photo_refine(
 
         def cost(c):
             return _photo_cost_planar(
-                c, reference, planes, offsets, aggregate, sigma, weights=weights
+                c, reference, planes, offsets, aggregate, sigma, weights=weights, support=support
             )
 
         c_own, c_hi, c_lo = cost(d), cost(hi), cost(lo)
@@ -515,6 +550,13 @@ def photo_sweep(
     planes = jnp.moveaxis(views, -1, -3)
     search = jnp.asarray(search, disparity.dtype)
     unit = jnp.linspace(-1.0, 1.0, steps, dtype=disparity.dtype)
+    # Every hypothesis shifts the whole map by the same amount, so the aggregation's support
+    # weights (colour and depth-aware) are the input's: computed once for all hypotheses.
+    support = (
+        _support_weights(reference, aggregate, sigma, disparity, support_jump)
+        if aggregate
+        else None
+    )
     costs = lax.map(
         lambda u: _photo_cost_planar(
             disparity + u * search,
@@ -524,7 +566,7 @@ def photo_sweep(
             aggregate,
             sigma,
             ssim,
-            support_jump=support_jump,
+            support=support,
         ),
         unit,
     )  # (steps, H, W)

@@ -720,11 +720,11 @@ def _propagate(
         # Every view but the centre (whose map was sharpened before the projection).
         others = np.nonzero((np.arange(U)[:, None] != rc) | (np.arange(V)[None, :] != cc))
         r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
+        # The maps and guides are gathered before the loop: slicing them by the loop's
+        # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         matted = lax.map(
-            lambda rc_pair: _matte(
-                disparity[rc_pair[0], rc_pair[1]], guides[rc_pair[0], rc_pair[1]], config
-            ),
-            (r_j, c_j),
+            lambda pair: _matte(pair[0], pair[1], config),
+            (disparity[r_j, c_j], guides[r_j, c_j]),
         )
         disparity = disparity.at[r_j, c_j].set(matted)
     return disparity, cross_h, cross_v, residual
