@@ -62,21 +62,10 @@ def _support_weights(
     return jnp.stack(planes)
 
 
-def _aggregate(
-    cost: Array,
-    reference: Array,
-    radius: int,
-    sigma: float,
-    disparity: Array | None = None,
-    support_jump: float | Array | None = None,
-    weights: Array | None = None,
-) -> Array:
-    """Colour-weighted window average of per-pixel costs ``(G, H, W)`` (adaptive support
-    weights ``exp(-|I_p - I_q|² / (2 σ²))`` of the reference, ``(2 radius + 1)²`` window).
-    With ``support_jump`` (and ``disparity`` ``(H, W)``), a window pixel ``q`` supports
-    ``p`` only where ``|d_q − d_p| ≤ support_jump``. ``weights``: the `_support_weights`
-    of these arguments, precomputed (then ``reference``, ``sigma``, ``disparity`` and
-    ``support_jump`` are not used)."""
+def _aggregate(cost: Array, weights: Array, radius: int) -> Array:
+    """Window average of per-pixel costs ``(G, H, W)`` with the `_support_weights`
+    ``weights`` (one ``(H, W)`` plane per offset of the ``(2 radius + 1)²`` window); edge-padded,
+    non-finite costs left out, ``inf`` where no finite cost has weight."""
     if radius == 0:
         return cost
     H, W = cost.shape[-2:]
@@ -86,8 +75,6 @@ def _aggregate(
     finite_p = jnp.isfinite(cost_p)
     cost_p = jnp.where(finite_p, cost_p, 0.0)
     finite_p = finite_p.astype(cost.dtype)
-    if weights is None:
-        weights = _support_weights(reference, radius, sigma, disparity, support_jump)
     num = jnp.zeros_like(cost_p[:, :H, :W])
     den = jnp.zeros_like(num)
     # Static unrolled loop over the window offsets (slices of the padded arrays): XLA fuses it
@@ -333,7 +320,9 @@ def _photo_cost_planar(
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
     means = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
-    means = _aggregate(means, reference, aggregate, sigma, candidate, support_jump, support)
+    if aggregate and support is None:
+        support = _support_weights(reference, aggregate, sigma, candidate, support_jump)
+    means = _aggregate(means, support, aggregate)
     return jnp.min(means, axis=0)
 
 
