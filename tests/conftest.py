@@ -11,7 +11,8 @@ import pytest
 
 # Persistent compilation cache: repeated test runs do not recompile. One folder per
 # pytest-xdist worker: JAX writes an entry in place, without a lock unless the cache has a size
-# cap, so one worker could read an entry that the other is still writing.
+# cap, so one worker could read an entry that the other is still writing (JAX then warns
+# about a truncated entry and recompiles).
 _WORKER = os.environ.get("PYTEST_XDIST_WORKER", "main")
 jax.config.update(
     "jax_compilation_cache_dir",
