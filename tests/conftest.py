@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import zlib
 from pathlib import Path
@@ -21,6 +22,42 @@ jax.config.update(
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _release_compiled_programs():
+    """Drop every compiled program after each test module.
+
+    XLA:CPU maps each loaded executable's code and data as separate memory regions (about
+    25 for a small function, about 5,000 for `tune`'s gradient through the whole chain),
+    and JAX keeps every executable it compiled. One pytest-xdist worker that keeps them all
+    reaches 64,000 mappings by the end of the suite, next to Linux's default limit of
+    65,530 (``vm.max_map_count``); past it LLVM cannot map a new executable and the worker
+    aborts. Programs a later module needs again come back from the persistent cache.
+    The module's teardown fails if half the limit is still mapped after the clearing, so
+    whatever keeps executables alive shows up as a named error, not as a crash later on.
+    """
+    yield
+    jax.clear_caches()
+    gc.collect()
+    mapped, limit = _memory_mappings()
+    if mapped is not None and limit is not None and mapped > limit // 2:
+        pytest.fail(
+            f"{mapped} memory mappings remain after jax.clear_caches() (limit {limit}, "
+            "vm.max_map_count): something keeps compiled executables alive"
+        )
+
+
+def _memory_mappings() -> tuple[int | None, int | None]:
+    """(mappings of this process, the kernel's per-process limit); None where unknown."""
+    try:
+        with open("/proc/self/maps") as f:
+            mapped = sum(1 for _ in f)
+        with open("/proc/sys/vm/max_map_count") as f:
+            limit = int(f.read())
+    except (OSError, ValueError):
+        return None, None
+    return mapped, limit
 
 
 @pytest.fixture(scope="session")
