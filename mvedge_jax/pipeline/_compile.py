@@ -22,6 +22,7 @@ import equinox as eqx
 import jax
 
 from .._cache import StageStore
+from .._memory import STAGE_MAPPINGS, ensure_mapping_headroom
 
 log = logging.getLogger(__name__)
 
@@ -116,6 +117,7 @@ class StageCache:
         entry = self._entries.get(key)
         seconds = 0.0
         if entry is None:
+            ensure_mapping_headroom(STAGE_MAPPINGS, release=self.clear)
             t0 = time.perf_counter()
             entry = self._compile(fn, stat, static, leaves, treedef, avals, static_items)
             seconds = time.perf_counter() - t0

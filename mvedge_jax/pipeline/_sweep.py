@@ -13,8 +13,16 @@ from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 from jaxtyping import Array, ArrayLike, Float
 
+from .._memory import CHAIN_MAPPINGS, ensure_mapping_headroom
 from ._chain import ChainOutput, estimate_disparity_arrays
+from ._compile import STAGE_CACHE
 from ._config import PipelineConfig, get_path, replace_paths
+
+
+def _release_programs() -> None:
+    """Drop the compiled programs of `sweep` and of the driver's stage cache."""
+    _program.cache_clear()
+    STAGE_CACHE.clear()
 
 
 def _centre_disparity(out: ChainOutput) -> Array:
@@ -128,6 +136,7 @@ def sweep(
 
     devices = list(jax.devices() if devices is None else devices)
     mesh = Mesh(np.asarray(devices), ("sweep",)) if len(devices) > 1 else None
+    ensure_mapping_headroom(CHAIN_MAPPINGS, release=_release_programs)
     fn = _program(tuple(paths), float(d_max), reduce, batch_size, mesh)
     if mesh is None:
         return fn(jnp.asarray(grid, dtype), views, config, key)

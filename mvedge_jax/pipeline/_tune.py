@@ -22,9 +22,11 @@ import optax
 from jaxtyping import Array, Float
 
 from .._fields import field_spec
+from .._memory import CHAIN_MAPPINGS, ensure_mapping_headroom
 from ..edges import check_cross_hair
 from ..lightfield import LightField
 from ._chain import estimate_disparity_arrays
+from ._compile import STAGE_CACHE
 from ._config import (
     PipelineConfig,
     get_path,
@@ -239,6 +241,7 @@ def tune(
         raise ValueError(f"learning_rate must be finite and > 0; got {learning_rate}")
     if loss not in LOSSES:
         raise ValueError(f"loss must be one of {LOSSES}; got {loss!r}")
+    ensure_mapping_headroom(CHAIN_MAPPINGS, release=STAGE_CACHE.clear)
     prepared = [TuneScene.from_light_field(lf, config) for lf in scenes]
     param = {p: _parametrisation(config, p) for p in fields}
     positive = {p: param[p][0] for p in fields}
