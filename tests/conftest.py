@@ -37,27 +37,18 @@ def _release_compiled_programs():
     The module's teardown fails if half the limit is still mapped after the clearing, so
     whatever keeps executables alive shows up as a named error, not as a crash later on.
     """
+    from mvedge_jax._memory import memory_mappings  # after the cache setup above
+
     yield
     jax.clear_caches()
     gc.collect()
-    mapped, limit = _memory_mappings()
-    if mapped is not None and limit is not None and mapped > limit // 2:
+    counts = memory_mappings()
+    if counts is not None and counts[0] > counts[1] // 2:
+        mapped, limit = counts
         pytest.fail(
             f"{mapped} memory mappings remain after jax.clear_caches() (limit {limit}, "
             "vm.max_map_count): something keeps compiled executables alive"
         )
-
-
-def _memory_mappings() -> tuple[int | None, int | None]:
-    """(mappings of this process, the kernel's per-process limit); None where unknown."""
-    try:
-        with open("/proc/self/maps") as f:
-            mapped = sum(1 for _ in f)
-        with open("/proc/sys/vm/max_map_count") as f:
-            limit = int(f.read())
-    except (OSError, ValueError):
-        return None, None
-    return mapped, limit
 
 
 @pytest.fixture(scope="session")
