@@ -28,7 +28,9 @@ from mvedge_jax.synthetic import make_scene
 def _no_persistent_cache_writes():
     """No persistent-cache writes in this module: serialising the executable of `tune`'s
     gradient through the whole chain crashed jaxlib 0.10.2 (segmentation fault in
-    ``put_executable_and_time``) in two CI runs from a fresh clone."""
+    ``put_executable_and_time``) in two CI runs from a fresh clone, probably because the
+    worker was then close to its limit of memory mappings (`tests/conftest.py`). The
+    executable is compiled once per module, so storing it would save nothing."""
     old = jax.config.jax_persistent_cache_min_compile_time_secs
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 1e9)
     yield
