@@ -19,12 +19,6 @@ from ._compile import STAGE_CACHE
 from ._config import PipelineConfig, get_path, replace_paths
 
 
-def _release_programs() -> None:
-    """Drop the compiled programs of `sweep` and of the driver's stage cache."""
-    _program.cache_clear()
-    STAGE_CACHE.clear()
-
-
 def _centre_disparity(out: ChainOutput) -> Array:
     U, V = out.disparity.shape[:2]
     return out.disparity[U // 2, V // 2]
@@ -136,7 +130,8 @@ def sweep(
 
     devices = list(jax.devices() if devices is None else devices)
     mesh = Mesh(np.asarray(devices), ("sweep",)) if len(devices) > 1 else None
-    ensure_mapping_headroom(CHAIN_MAPPINGS, release=_release_programs)
+    # `jax.clear_caches` frees the executables of the jitted programs `_program` keeps
+    ensure_mapping_headroom(CHAIN_MAPPINGS, release=STAGE_CACHE.clear)
     fn = _program(tuple(paths), float(d_max), reduce, batch_size, mesh)
     if mesh is None:
         return fn(jnp.asarray(grid, dtype), views, config, key)
