@@ -2,12 +2,14 @@
 
 For every scene, ours (`superpixels`; ``ours``: projected with the EPI segments' disparity,
 ``ours_dense``: with the Ch. 6 disparity passed as ``disparity=``) and the k-means baseline
-(`kmeans_superpixels`) with our Ch. 6 disparity (`estimate_disparity`) and with the
-ground-truth disparity, at every size; prints one table per scene and the mean over scenes,
-and plots each metric against the size. ``--methods`` picks a subset; ``--cache DIR`` keeps
-each scene's edges, surface vectors and Ch. 6 disparity (pickled numpy) for later runs. The
-extra column ``depth_edge_recall`` is the centre view's recall of ground-truth disparity
-jumps (not a thesis metric).
+(`kmeans_superpixels`, the thesis' baseline: one seed grid, ``seed_candidates=1``) with our
+Ch. 6 disparity (`estimate_disparity`) and with the ground-truth disparity, at every size;
+``kmeans_ours_disparity_select`` is that baseline with the seed-grid choice of ours
+(``seed_candidates`` of the config, default 6; not in the thesis); prints one table per
+scene and the mean over scenes, and plots each metric against the size. ``--methods`` picks
+a subset; ``--cache DIR`` keeps each scene's edges, surface vectors and Ch. 6 disparity
+(pickled numpy) for later runs. The extra column ``depth_edge_recall`` is the centre view's
+recall of ground-truth disparity jumps (not a thesis metric).
 
 Usage:
     PYTHONPATH=. python experiments/superpixels_ch5.py --synthetic 0 1 --plot /tmp/fig54.png
@@ -36,7 +38,13 @@ METRICS = (
     "compactness",
     "depth_edge_recall",
 )
-METHODS = ("ours", "ours_dense", "kmeans_ours_disparity", "kmeans_gt_disparity")
+METHODS = (
+    "ours",
+    "ours_dense",
+    "kmeans_ours_disparity",
+    "kmeans_gt_disparity",
+    "kmeans_ours_disparity_select",
+)
 
 
 def _scenes(args):
@@ -115,6 +123,8 @@ def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
     rows = {}
     for size in sizes:
         cfg = SuperpixelConfig(size=float(size), **config_kw)
+        # the thesis' baseline clusters from SLIC's seed grid only
+        base_cfg = SuperpixelConfig(size=float(size), **{**config_kw, "seed_candidates": 1})
         out = {}
         for name, dense in (("ours", None), ("ours_dense", disparity)):
             if name not in methods:
@@ -127,11 +137,15 @@ def run_scene(lf, ids, sizes, config_kw, cache=None, methods=METHODS) -> dict:
                 consistent_fraction=res.consistent_fraction,
                 depth_edge_recall=depth_edge_recall(res.labels[U // 2, V // 2], gt_c),
             )
-        for name, d in (("kmeans_ours_disparity", ours_d), ("kmeans_gt_disparity", gt_c)):
+        for name, d, c in (
+            ("kmeans_ours_disparity", ours_d, base_cfg),
+            ("kmeans_gt_disparity", gt_c, base_cfg),
+            ("kmeans_ours_disparity_select", ours_d, cfg),
+        ):
             if name not in methods:
                 continue
             t0 = time.perf_counter()
-            b = kmeans_superpixels(lf, d, cfg)
+            b = kmeans_superpixels(lf, d, c)
             out[name] = dict(
                 superpixel_metrics(b.labels, **gt_kw),
                 seconds=time.perf_counter() - t0,
@@ -175,7 +189,7 @@ def plot(rows: dict, path: str, title: str) -> None:
     keys = [k for k in METRICS if k in next(iter(rows[sizes[0]].values()))]
     fig, axes = plt.subplots(1, len(keys), figsize=(3.6 * len(keys), 3.2), squeeze=False)
     for ax, k in zip(axes[0], keys, strict=True):
-        for m, style in zip(METHODS, ("o-", "d-", "s--", "^:"), strict=True):
+        for m, style in zip(METHODS, ("o-", "d-", "s--", "^:", "v-."), strict=True):
             if m not in rows[sizes[0]]:
                 continue
             ax.plot(sizes, [rows[s][m][k] for s in sizes], style, label=m)

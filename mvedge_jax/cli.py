@@ -969,7 +969,17 @@ def eval_cmd(pred: str, gt: str, border: int, as_json: bool) -> None:
     help="Project the centre labels into every view with the Ch. 6 dense disparity "
     "(estimate_disparity; about 15 s more at 512x512) instead of the EPI segments' disparity.",
 )
-def superpixels_command(path: str, views, scale, transpose, size, out, force, dense) -> None:
+@click.option(
+    "--seed-candidates",
+    type=click.IntRange(1, 8),
+    default=6,
+    show_default=True,
+    help="Cluster from this many shifted seed grids and keep the partition predicted to be "
+    "the most view-consistent (1: the thesis' single grid, fastest).",
+)
+def superpixels_command(
+    path: str, views, scale, transpose, size, out, force, dense, seed_candidates
+) -> None:
     """View-consistent superpixels of every view of the light field in PATH (thesis Ch. 5).
 
     Writes labels.npz (labels and disparity of every view), views/RR_CC.png (each view with
@@ -1001,7 +1011,7 @@ def superpixels_command(path: str, views, scale, transpose, size, out, force, de
     U, V = lf.grid
     H, W = lf.size
     click.echo(f"loaded {lf.name}: {U}x{V} views of {H}x{W} px in {seconds:.2f} s")
-    config = SuperpixelConfig(size=float(size))
+    config = SuperpixelConfig(size=float(size), seed_candidates=seed_candidates)
     t0 = time.perf_counter()
     try:
         dense_d = None
@@ -1032,6 +1042,7 @@ def superpixels_command(path: str, views, scale, transpose, size, out, force, de
         "n_labels_used": int(np.unique(labels).size),
         "consistent_fraction": res.consistent_fraction,
         "dense_disparity": bool(dense),
+        "seed_candidates": int(seed_candidates),
         "seconds_edges_and_surface": t_edges,
         "seconds_per_stage": res.seconds,
         "seconds_total": total,

@@ -251,6 +251,16 @@ def _centroid_deviation(
     cnt = np.bincount(key, minlength=n * U * V).reshape(n, U * V)
     cx = np.bincount(key, px[mask], minlength=n * U * V).reshape(n, U * V)
     cy = np.bincount(key, py[mask], minlength=n * U * V).reshape(n, U * V)
+    return centroid_deviation_from_sums(cnt, cx, cy)
+
+
+def centroid_deviation_from_sums(
+    cnt: np.ndarray, cx: np.ndarray, cy: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The self-similarity error's per-superpixel terms from per-view sums: ``cnt (n, K)``
+    pixel counts and ``cx, cy (n, K)`` sums of their centre-view coordinates (pixels) of ``n``
+    superpixels in ``K`` views; returns ``(sum over the views it appears in of the distance of
+    its centroid there from the mean of those centroids (n,), number of such views (n,))``."""
     has = cnt > 0
     cx = np.where(has, cx / np.maximum(cnt, 1), 0.0)
     cy = np.where(has, cy / np.maximum(cnt, 1), 0.0)

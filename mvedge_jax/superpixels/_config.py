@@ -13,6 +13,19 @@ from ..surface import SurfaceConfig
 
 _f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
 
+#: Offsets ``(sx, sy)`` of the k-means seed grid, in grid cells, in the order
+#: ``SuperpixelConfig.seed_candidates`` takes them (the first is SLIC's grid).
+SEED_SHIFTS: tuple[tuple[float, float], ...] = (
+    (0.0, 0.0),
+    (0.5, 0.0),
+    (0.0, 0.5),
+    (0.5, 0.5),
+    (0.25, 0.25),
+    (-0.25, 0.25),
+    (0.25, -0.25),
+    (-0.25, -0.25),
+)
+
 
 class SuperpixelConfig(eqx.Module):
     """Configuration of `superpixels` and `kmeans_superpixels`.
@@ -53,6 +66,14 @@ class SuperpixelConfig(eqx.Module):
         lab_scale: unit of the colour features: CIELAB is multiplied by this before
             ``weight_lab`` (1: L* in [0, 100]).
         kmeans_iters: Lloyd iterations of the clustering (scikit-learn ``max_iter``).
+        seed_candidates: with ``centre_first``, `superpixels` clusters from this many seed
+            grids (the first ``seed_candidates`` offsets of ``SEED_SHIFTS``), labels the
+            centre view of each, and keeps the partition with the lowest predicted
+            self-similarity error: the centre labels moved into every view with the centre
+            disparity (the dense ``disparity`` if given, else the EPI segments'), z-buffered,
+            each visible pixel counted at its centre position (no ground truth involved;
+            not in the thesis). 1: SLIC's grid only (the thesis). At most
+            ``len(SEED_SHIFTS)`` (8). Default 6 (docs/SUPERPIXELS.md).
         keep_disagreeing: with ``centre_first=False``, where the horizontal and vertical
             segmentations disagree, keep the nearer one's label (ties: the horizontal)
             instead of unlabelling the pixel (thesis: unlabel, then propagate).
@@ -122,6 +143,7 @@ class SuperpixelConfig(eqx.Module):
     weight_lab: float = eqx.field(static=True, default=3.0)
     lab_scale: float = eqx.field(static=True, default=0.2)
     kmeans_iters: int = eqx.field(static=True, default=20)
+    seed_candidates: int = eqx.field(static=True, default=6)
     keep_disagreeing: bool = eqx.field(static=True, default=False)
     centre_first: bool = eqx.field(static=True, default=True)
     connected: bool = eqx.field(static=True, default=True)
@@ -143,6 +165,11 @@ class SuperpixelConfig(eqx.Module):
         for name in ("line_capacity", "kmeans_iters", "propagation_radius"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"SuperpixelConfig.{name} must be >= 1; got {getattr(self, name)}")
+        if not 1 <= int(self.seed_candidates) <= len(SEED_SHIFTS):
+            raise ValueError(
+                f"SuperpixelConfig.seed_candidates must be in [1, {len(SEED_SHIFTS)}]; "
+                f"got {self.seed_candidates}"
+            )
         if self.smooth_radius < 0:
             raise ValueError(
                 f"SuperpixelConfig.smooth_radius must be >= 0; got {self.smooth_radius}"

@@ -10,15 +10,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
 from ..edges import HORIZONTAL, VERTICAL, EdgeSet, detect_edges
 from ..lightfield import LightField, rgb_to_lab
+from ..metrics._superpixel import centroid_deviation_from_sums
 from ..surface import surface_vectors
-from ._config import SuperpixelConfig
+from ._config import SEED_SHIFTS, SuperpixelConfig
 from ._label import forward_labels, nearest_fill, propagate_labels
 from ._segment import EPISegments, render_segments, resolve_unknown, segment_epis
 
@@ -98,23 +99,30 @@ def _cluster_maps(table, seg_labels):
     return jnp.where(seg_labels >= 0, out, -1)
 
 
-def _uniform_seeds(H: int, W: int, k: int) -> np.ndarray:
-    """``(k', 2)`` (x, y) seeds on a regular grid of about ``k`` cells (SLIC's seeding)."""
+def _uniform_seeds(H: int, W: int, k: int, shift: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """``(k', 2)`` (x, y) seeds on a regular grid of about ``k`` cells (SLIC's seeding), moved
+    by ``shift = (sx, sy)`` grid cells and clipped into the image."""
     step = np.sqrt(H * W / k)
     ny, nx = max(1, round(H / step)), max(1, round(W / step))
-    ys = (np.arange(ny) + 0.5) * H / ny - 0.5
-    xs = (np.arange(nx) + 0.5) * W / nx - 0.5
+    ys = np.clip((np.arange(ny) + 0.5 + shift[1]) * H / ny - 0.5, 0, H - 1)
+    xs = np.clip((np.arange(nx) + 0.5 + shift[0]) * W / nx - 0.5, 0, W - 1)
     gy, gx = np.meshgrid(ys, xs, indexing="ij")
     return np.stack([gx.ravel(), gy.ravel()], -1)
 
 
 def _kmeans(
-    xy: np.ndarray, feats: np.ndarray, H: int, W: int, k: int, iters: int
+    xy: np.ndarray,
+    feats: np.ndarray,
+    H: int,
+    W: int,
+    k: int,
+    iters: int,
+    shift: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, int]:
-    """scikit-learn k-means of weighted ``feats (N, F)`` from about ``k`` uniform seeds (each
-    takes the features of the point nearest to it in the image; duplicates merged); returns
-    the labels and the number of clusters."""
-    seeds = _uniform_seeds(H, W, k)
+    """scikit-learn k-means of weighted ``feats (N, F)`` from about ``k`` uniform seeds moved
+    by ``shift`` grid cells (each takes the features of the point nearest to it in the image;
+    duplicates merged); returns the labels and the number of clusters."""
+    seeds = _uniform_seeds(H, W, k, shift)
     _, nearest = cKDTree(xy).query(seeds)
     init = np.unique(feats[nearest], axis=0)
     init = init[: feats.shape[0]]
@@ -197,6 +205,45 @@ def _project_centre(centre_l, centre_d, offsets):
     """Centre labels ``(H, W)`` forward-projected (z-buffered) with the centre disparity into
     the views at ``offsets (K, 2)``: ``(labels, disparity)`` of shape ``(K, H, W)``."""
     return jax.vmap(lambda o: forward_labels(centre_l, centre_d, o[0], o[1]))(offsets)
+
+
+def _centre_visibility(centre_d: Float[ArrayLike, "H W"], U: int, V: int) -> csr_matrix:
+    """``(U V, H W)`` sparse counts: how many pixels of view ``(r, c)`` (row-major) show each
+    centre-view pixel when the centre view is forward-projected (z-buffered, nearer wins)
+    with its disparity ``centre_d`` (pixels per view step). A centre pixel hidden or moved
+    out of the frame in a view counts 0 there."""
+    centre_d = jnp.asarray(centre_d, jnp.float32)
+    H, W = centre_d.shape
+    index = jnp.arange(H * W, dtype=jnp.int32).reshape(H, W)
+    seen, _ = _project_centre(index, centre_d, jnp.asarray(_view_offsets(U, V)))
+    seen = np.asarray(seen).reshape(U * V, H * W)
+    ok = seen >= 0
+    indptr = np.concatenate([[0], np.cumsum(ok.sum(1))])
+    return csr_matrix((np.ones(int(indptr[-1])), seen[ok], indptr), shape=(U * V, H * W))
+
+
+def _predicted_self_similarity(
+    centre_labels: Int[ArrayLike, "H W"], visibility: csr_matrix
+) -> float:
+    """The self-similarity error that centre-view superpixels would have if every view
+    showed exactly the centre pixels that `_centre_visibility` finds visible there, with
+    their labels (a pixel moved back into the centre view lands on its source): per
+    superpixel, the mean distance of its per-view centroids from their mean; mean over
+    superpixels (pixels). The pixels that only other views see (disocclusions, the frame's
+    new strips) are not counted. Not in the thesis: the score `superpixels` uses to choose
+    its seed grid (``SuperpixelConfig.seed_candidates``)."""
+    H, W = np.shape(centre_labels)
+    _, lab = np.unique(np.asarray(centre_labels).ravel(), return_inverse=True)
+    n = int(lab.max()) + 1
+    y, x = np.divmod(np.arange(H * W, dtype=np.float64), W)
+    # one sparse product gives every view's pixel count and coordinate sums per label
+    cols = np.stack([lab, lab + n, lab + 2 * n], 1).ravel()
+    data = np.stack([np.ones(H * W), x, y], 1).ravel()
+    member = csr_matrix((data, cols, np.arange(0, 3 * H * W + 1, 3)), shape=(H * W, 3 * n))
+    sums = (visibility @ member).toarray().T
+    dev, views = centroid_deviation_from_sums(sums[:n], sums[n : 2 * n], sums[2 * n :])
+    keep = views > 0
+    return float(np.mean(dev[keep] / views[keep])) if keep.any() else 0.0
 
 
 def _look_back(disparity, dr, dc):
@@ -418,6 +465,32 @@ def _propagate(config, lab, labels, disp, offsets, cmp_lab, cmp_off, *, w_photo=
     )
 
 
+def _centre_labels(
+    config, row_l, row_d, col_l, col_d, lab_c, cmp_lab, cmp_off, dense_c, lo, span, k
+):
+    """The centre view's complete labels and disparity ``(1, H, W)`` (``centre_first``): the
+    pixels where the centre row's and column's cluster maps agree, eq 5.1 propagation and
+    nearest fill; with a dense centre disparity ``dense_c (H, W)`` and ``refine_iters``, the
+    local k-means refinement; the majority filter; the connectivity step."""
+    V, U = row_l.shape[0], col_l.shape[0]
+    rc, cc = U // 2, V // 2
+    c_ok = (row_l[cc] >= 0) & (row_l[cc] == col_l[rc])
+    c_l = jnp.where(c_ok, row_l[cc], -1)[None]
+    c_d = jnp.where(c_ok, 0.5 * (row_d[cc] + col_d[rc]), 0.0)[None]
+    c_l, c_d = _propagate(
+        config, lab_c[None], c_l, c_d, jnp.zeros((1, 2), jnp.float32), cmp_lab, cmp_off
+    )
+    c_l, c_d = nearest_fill(c_l, c_d)
+    if dense_c is not None and config.refine_iters > 0:
+        c_l = _refine_centre_dense(c_l, lab_c, dense_c, lo, span, k, config)
+    if config.smooth_radius > 0:
+        c_l = _mode_filter(c_l[0], config.smooth_radius)[None]
+    if config.connected:
+        frag = _fragments(np.asarray(c_l[0]))
+        c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)
+    return c_l, c_d
+
+
 def superpixels(
     lf: LightField,
     config: SuperpixelConfig = SuperpixelConfig(),
@@ -440,7 +513,13 @@ def superpixels(
        normalised to [0, 1] over the scene's range; colour: the mean CIELAB of its EPI
        pixels), weighted by ``weight_xy, weight_xy, weight_d, weight_lab · lab_scale``;
        scikit-learn k-means from ``round(H W / size²)`` uniform seeds (each seed takes the
-       features of the segment nearest to it in the image).
+       features of the segment nearest to it in the image). With ``config.centre_first``
+       and ``config.seed_candidates > 1`` (default 6; not in the thesis) this runs from
+       that many shifted seed grids, the centre view of each is labelled (step 3), and the
+       partition with the lowest predicted self-similarity error is kept
+       (`_predicted_self_similarity`: the centre labels moved into every view with the
+       centre disparity, the dense ``disparity`` if given, else the segments'; no ground
+       truth).
     3. Every view ``(r, c)`` receives the cluster labels of the horizontal segmentation of view
        ``(r_c, c)`` shifted vertically and of the vertical segmentation of view ``(r, c_c)``
        shifted horizontally, by their pixels' disparities (z-buffer: nearer wins).
@@ -572,41 +651,57 @@ def superpixels(
     d_all = np.concatenate([f[2] for f in feats])
     lo, span = _disparity_scale(lf, d_all)
     F = np.concatenate([_features(*f, lo, span, config) for f in feats])
-    k = min(config.n_superpixels(H, W), xy.shape[0])
-    cluster, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
+    k_seeds = min(config.n_superpixels(H, W), xy.shape[0])
+    row_d = jnp.transpose(disp_h, (1, 0, 2))  # (V, H, W): views (rc, c)
+    col_d = jnp.transpose(disp_v, (1, 2, 0))  # (U, H, W): views (r, cc)
+    cmp_lab, cmp_off = _ends(lab_row, lab_col)
     n_h = where[0][0].size
-    tables = []
-    for (e, s), seg, lbl in zip(where, (seg_h, seg_v), (cluster[:n_h], cluster[n_h:]), strict=True):
-        t = np.full(seg.valid.shape, -1, np.int32)
-        t[e, s] = lbl
-        tables.append(jnp.asarray(t))
+    shifts = SEED_SHIFTS[: config.seed_candidates] if config.centre_first else SEED_SHIFTS[:1]
+    dense_centre = None if disparity is None else disparity[rc, cc]
+    vis = (
+        None if dense_centre is None or len(shifts) == 1 else _centre_visibility(dense_centre, U, V)
+    )
+    best_score, best = np.inf, None
+    for shift in shifts:
+        # One candidate partition per seed grid; the most view-consistent one by
+        # `_predicted_self_similarity` is kept.
+        cluster, k = _kmeans(xy, F, H, W, k_seeds, config.kmeans_iters, shift)
+        maps = []
+        for (e, seg_i), seg, lbl, lab_map in zip(
+            where, (seg_h, seg_v), (cluster[:n_h], cluster[n_h:]), (lab_h, lab_v), strict=True
+        ):
+            table = np.full(seg.valid.shape, -1, np.int32)
+            table[e, seg_i] = lbl
+            maps.append(_cluster_maps(jnp.asarray(table), lab_map))
+        row_l = jnp.transpose(maps[0], (1, 0, 2))  # (V, H, W): views (rc, c)
+        col_l = jnp.transpose(maps[1], (1, 2, 0))  # (U, H, W): views (r, cc)
+        c_l = c_d = None
+        if config.centre_first:
+            c_l, c_d = _centre_labels(
+                config,
+                row_l,
+                row_d,
+                col_l,
+                col_d,
+                lab_row[cc],
+                cmp_lab,
+                cmp_off,
+                dense_centre,
+                lo,
+                span,
+                k,
+            )
+        if len(shifts) > 1:
+            view_vis = vis if vis is not None else _centre_visibility(c_d[0], U, V)
+            score = _predicted_self_similarity(c_l[0], view_vis)
+            if score >= best_score:
+                continue
+            best_score = score
+        best = (row_l, col_l, c_l, c_d, k)
+    row_l, col_l, c_l, c_d, k = best
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    th, tv = tables
-    cl_h = _cluster_maps(th, lab_h)
-    cl_v = _cluster_maps(tv, lab_v)
-    row_l = jnp.transpose(cl_h, (1, 0, 2))  # (V, H, W): views (rc, c)
-    row_d = jnp.transpose(disp_h, (1, 0, 2))
-    col_l = jnp.transpose(cl_v, (1, 2, 0))  # (U, H, W): views (r, cc)
-    col_d = jnp.transpose(disp_v, (1, 2, 0))
-    cmp_lab, cmp_off = _ends(lab_row, lab_col)
     if config.centre_first:
-        # The centre view first: its agreeing labels, eq 5.1, nearest fill; then every view's
-        # disagreements and holes are settled against it.
-        c_ok = (row_l[cc] >= 0) & (row_l[cc] == col_l[rc])
-        c_l = jnp.where(c_ok, row_l[cc], -1)[None]
-        c_d = jnp.where(c_ok, 0.5 * (row_d[cc] + col_d[rc]), 0.0)[None]
-        c_l, c_d = _propagate(
-            config, lab_row[cc][None], c_l, c_d, jnp.zeros((1, 2), jnp.float32), cmp_lab, cmp_off
-        )
-        c_l, c_d = nearest_fill(c_l, c_d)
-        if disparity is not None and config.refine_iters > 0:
-            c_l = _refine_centre_dense(c_l, lab_row[cc], disparity[rc, cc], lo, span, k, config)
-        if config.smooth_radius > 0:
-            c_l = _mode_filter(c_l[0], config.smooth_radius)[None]
-        if config.connected:
-            frag = _fragments(np.asarray(c_l[0]))
-            c_l, c_d = nearest_fill(jnp.where(frag, -1, c_l), c_d)
         if disparity is None:
             labels, disp, agree = _project_resolve(row_l, row_d, col_l, col_d, c_l[0], c_d[0])
         else:
@@ -655,7 +750,10 @@ def kmeans_superpixels(
 
     Every centre-view pixel becomes ``(x, y, d, L*, a*, b*)`` with the same weights as
     `superpixels` (``d`` normalised over the scene's range); scikit-learn k-means from
-    ``round(H W / size²)`` uniform seeds; the labels are forward-projected into every view
+    ``round(H W / size²)`` uniform seeds (with ``config.seed_candidates > 1``, from that many
+    shifted seed grids, keeping the clustering with the lowest predicted self-similarity
+    error under ``disparity``, as `superpixels` does; ``seed_candidates=1`` is the thesis'
+    baseline); the labels are forward-projected into every view
     with ``disparity`` (z-buffer: nearer wins); the pixels no projection reaches take the
     label of the cheapest labelled pixel nearby in ``(x, y, L*, a*, b*)`` (eq 5.1 without the
     photo-consistency term), and the rest the nearest labelled pixel.
@@ -693,10 +791,18 @@ def kmeans_superpixels(
     )
     lo, span = _disparity_scale(lf, d.ravel())
     F = _features(gx.ravel(), gy.ravel(), d.ravel(), lab_c, lo, span, config)
-    k = config.n_superpixels(H, W)
+    k_seeds = config.n_superpixels(H, W)
     xy = np.stack([gx.ravel(), gy.ravel()], -1)
-    centre, k = _kmeans(xy, F, H, W, k, config.kmeans_iters)
-    centre = jnp.asarray(centre.reshape(H, W))
+    shifts = SEED_SHIFTS[: config.seed_candidates]
+    vis = _centre_visibility(d, U, V) if len(shifts) > 1 else None
+    best_score, centre, k = np.inf, None, 0
+    for shift in shifts:
+        cand, k_cand = _kmeans(xy, F, H, W, k_seeds, config.kmeans_iters, shift)
+        cand = cand.reshape(H, W)
+        score = _predicted_self_similarity(cand, vis) if vis is not None else 0.0
+        if centre is None or score < best_score:
+            best_score, centre, k = score, cand, k_cand
+    centre = jnp.asarray(centre)
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     offsets = jnp.asarray(_view_offsets(U, V))

@@ -65,9 +65,7 @@ def test_frame_strip_takes_the_surface_from_outside(visibility):
     # Flat colours: the fill's colour choice ties and takes the farthest value.
     guides = jnp.full(maps.shape + (3,), 0.5)
     out = np.asarray(
-        _cross_hair_fill(
-            maps, vv, jnp.ones_like(maps), U // 2, offsets, centre, guides, config
-        )
+        _cross_hair_fill(maps, vv, jnp.ones_like(maps), U // 2, offsets, centre, guides, config)
     )
     np.testing.assert_array_equal(out[U // 2], np.asarray(centre))
     np.testing.assert_array_equal(out[4, 2:10], np.asarray(pv)[4, 2:10])

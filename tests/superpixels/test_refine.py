@@ -55,7 +55,10 @@ def refine_runs(scene):
     lf, _, edges, offset = scene
     gt = np.asarray(lf.gt_disparity)
     kw = dict(edges=edges, surface_offset=offset, disparity=gt)
-    return [superpixels(lf, SuperpixelConfig(size=8, refine_iters=n), **kw) for n in (0, 4)]
+    return [
+        superpixels(lf, SuperpixelConfig(size=8, refine_iters=n, seed_candidates=1), **kw)
+        for n in (0, 4)
+    ]
 
 
 def test_refine_follows_objects_in_superpixels(scene, refine_runs):
