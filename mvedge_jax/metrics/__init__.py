@@ -19,6 +19,7 @@ from ._scalefit import scale_fit_metrics as scale_fit_metrics
 from ._superpixel import achievable_segmentation_accuracy as achievable_segmentation_accuracy
 from ._superpixel import boundary_mask as boundary_mask
 from ._superpixel import boundary_recall as boundary_recall
+from ._superpixel import centroid_deviation_from_sums as centroid_deviation_from_sums
 from ._superpixel import compactness as compactness
 from ._superpixel import labels_per_pixel as labels_per_pixel
 from ._superpixel import self_similarity_error as self_similarity_error

@@ -257,10 +257,22 @@ def _centroid_deviation(
 def centroid_deviation_from_sums(
     cnt: np.ndarray, cx: np.ndarray, cy: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The self-similarity error's per-superpixel terms from per-view sums: ``cnt (n, K)``
-    pixel counts and ``cx, cy (n, K)`` sums of their centre-view coordinates (pixels) of ``n``
-    superpixels in ``K`` views; returns ``(sum over the views it appears in of the distance of
-    its centroid there from the mean of those centroids (n,), number of such views (n,))``."""
+    """The self-similarity error's per-superpixel terms from per-view sums.
+
+    `self_similarity_error` is ``mean(dev / views)`` over the superpixels with ``views > 0``.
+
+    Args:
+        cnt: ``(n, K)`` float pixel counts of ``n`` superpixels in ``K`` views.
+        cx, cy: ``(n, K)`` float sums of those pixels' centre-view coordinates (pixels).
+
+    Returns:
+        ``dev (n,)``: per superpixel, the sum over the views it appears in (count > 0) of the
+        distance of its centroid there from the mean of those centroids (pixels);
+        ``views (n,)`` int: the number of such views.
+
+    References:
+        Thesis Sec. 5.2.3 (self-similarity error).
+    """
     has = cnt > 0
     cx = np.where(has, cx / np.maximum(cnt, 1), 0.0)
     cy = np.where(has, cy / np.maximum(cnt, 1), 0.0)

@@ -17,7 +17,7 @@ from sklearn.cluster import KMeans
 
 from ..edges import HORIZONTAL, VERTICAL, EdgeSet, detect_edges
 from ..lightfield import LightField, rgb_to_lab
-from ..metrics._superpixel import centroid_deviation_from_sums
+from ..metrics import centroid_deviation_from_sums
 from ..surface import surface_vectors
 from ._config import SEED_SHIFTS, SuperpixelConfig
 from ._label import forward_labels, nearest_fill, propagate_labels
