@@ -184,7 +184,9 @@ def main() -> None:
             print(f"{name} size {size}")
             ours = superpixels(lf, cfg, edges=edges, surface_offset=offset, disparity=disparity)
             _print("ours", split(np.asarray(ours.labels), gt, gt_c))
-            km = kmeans_superpixels(lf, np.asarray(disparity[U // 2, V // 2]), cfg)
+            # the thesis' baseline: SLIC's seed grid only
+            base_cfg = SuperpixelConfig(size=float(size), seed_candidates=1)
+            km = kmeans_superpixels(lf, np.asarray(disparity[U // 2, V // 2]), base_cfg)
             _print("k-means (our d)", split(np.asarray(km.labels), gt, gt_c))
 
 
