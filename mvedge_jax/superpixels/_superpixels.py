@@ -246,6 +246,20 @@ def _predicted_self_similarity(
     return float(np.mean(dev[keep] / views[keep])) if keep.any() else 0.0
 
 
+def _most_consistent(shifts, candidate, score):
+    """The candidate partition ``candidate(shift)`` of the seed grid with the lowest
+    ``score(candidate)`` (the first on ties); with one grid, that grid's without scoring."""
+    best_score, best = np.inf, None
+    for shift in shifts:
+        cand = candidate(shift)
+        if len(shifts) == 1:
+            return cand
+        value = score(cand)
+        if value < best_score:
+            best_score, best = value, cand
+    return best
+
+
 def _look_back(disparity, dr, dc):
     """Nearest centre-view pixel ``(cy, cx)`` (clipped into the image) of every pixel of views
     at offsets ``dr, dc`` (broadcast against ``disparity (..., H, W)``) moved back to the
@@ -661,10 +675,9 @@ def superpixels(
     vis = (
         None if dense_centre is None or len(shifts) == 1 else _centre_visibility(dense_centre, U, V)
     )
-    best_score, best = np.inf, None
-    for shift in shifts:
-        # One candidate partition per seed grid; the most view-consistent one by
-        # `_predicted_self_similarity` is kept.
+
+    def candidate(shift):
+        # one candidate partition per seed grid, with its completed centre view
         cluster, k = _kmeans(xy, F, H, W, k_seeds, config.kmeans_iters, shift)
         maps = []
         for (e, seg_i), seg, lbl, lab_map in zip(
@@ -678,27 +691,17 @@ def superpixels(
         c_l = c_d = None
         if config.centre_first:
             c_l, c_d = _centre_labels(
-                config,
-                row_l,
-                row_d,
-                col_l,
-                col_d,
-                lab_row[cc],
-                cmp_lab,
-                cmp_off,
-                dense_centre,
-                lo,
-                span,
-                k,
-            )
-        if len(shifts) > 1:
-            view_vis = vis if vis is not None else _centre_visibility(c_d[0], U, V)
-            score = _predicted_self_similarity(c_l[0], view_vis)
-            if score >= best_score:
-                continue
-            best_score = score
-        best = (row_l, col_l, c_l, c_d, k)
-    row_l, col_l, c_l, c_d, k = best
+                config, row_l, row_d, col_l, col_d, lab_row[cc], cmp_lab, cmp_off,
+                dense_centre, lo, span, k,
+            )  # fmt: skip
+        return row_l, col_l, c_l, c_d, k
+
+    def score(cand):
+        c_l, c_d = cand[2], cand[3]
+        view_vis = vis if vis is not None else _centre_visibility(c_d[0], U, V)
+        return _predicted_self_similarity(c_l[0], view_vis)
+
+    row_l, col_l, c_l, c_d, k = _most_consistent(shifts, candidate, score)
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     if config.centre_first:
@@ -795,14 +798,12 @@ def kmeans_superpixels(
     xy = np.stack([gx.ravel(), gy.ravel()], -1)
     shifts = SEED_SHIFTS[: config.seed_candidates]
     vis = _centre_visibility(d, U, V) if len(shifts) > 1 else None
-    best_score, centre, k = np.inf, None, 0
-    for shift in shifts:
-        cand, k_cand = _kmeans(xy, F, H, W, k_seeds, config.kmeans_iters, shift)
-        cand = cand.reshape(H, W)
-        score = _predicted_self_similarity(cand, vis) if vis is not None else 0.0
-        if centre is None or score < best_score:
-            best_score, centre, k = score, cand, k_cand
-    centre = jnp.asarray(centre)
+    centre, k = _most_consistent(
+        shifts,
+        lambda shift: _kmeans(xy, F, H, W, k_seeds, config.kmeans_iters, shift),
+        lambda cand: _predicted_self_similarity(cand[0].reshape(H, W), vis),
+    )
+    centre = jnp.asarray(centre.reshape(H, W))
     seconds["cluster"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     offsets = jnp.asarray(_view_offsets(U, V))
