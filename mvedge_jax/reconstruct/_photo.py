@@ -14,10 +14,23 @@ from ..lightfield import backward_warp_planar, ssim_dissimilarity
 
 
 def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
+    """``(lo, hi)``: minimum and maximum of ``d`` over the ``(2 radius + 1)²`` window of every
+    pixel (edge-replicated border).
+
+    Separable: along the rows, then along the columns, as elementwise extrema of shifted
+    slices, which XLA's CPU backend fuses and vectorises (a 512² map: 1.4 ms against 5.7 ms
+    for a 5×5 ``lax.reduce_window``, 2.2 ms against 12.6 ms for 7×7; identical values).
+    """
+    H, W = d.shape
     k = 2 * radius + 1
-    pad = ((radius, radius), (radius, radius))
-    hi = lax.reduce_window(jnp.pad(d, pad, mode="edge"), -jnp.inf, lax.max, (k, k), (1, 1), "VALID")
-    lo = lax.reduce_window(jnp.pad(d, pad, mode="edge"), jnp.inf, lax.min, (k, k), (1, 1), "VALID")
+    p = jnp.pad(d, radius, mode="edge")
+    hi, lo = p[:, :W], p[:, :W]
+    for s in range(1, k):
+        hi, lo = jnp.maximum(hi, p[:, s : s + W]), jnp.minimum(lo, p[:, s : s + W])
+    row_hi, row_lo = hi, lo
+    hi, lo = row_hi[:H], row_lo[:H]
+    for s in range(1, k):
+        hi, lo = jnp.maximum(hi, row_hi[s : s + H]), jnp.minimum(lo, row_lo[s : s + H])
     return lo, hi
 
 
@@ -677,8 +690,10 @@ def photo_seeds(
     value = hyps[inner] + vertex * step
     value = _block_upsample(value, scale, (H, W))
     distinct = _block_upsample(distinct, scale, (H, W))
+    # Within ``min_distance`` (chessboard) of a support pixel: a separable window OR (the
+    # k×k `reduce_window` took 31 ms at 512², the two 1-D ones 0.4 ms).
     k = 2 * min_distance + 1
-    near = lax.reduce_window(
-        jnp.pad(support, min_distance), False, lax.bitwise_or, (k, k), (1, 1), "VALID"
-    )
+    near = jnp.pad(support, min_distance)
+    for window in ((k, 1), (1, k)):
+        near = lax.reduce_window(near, False, lax.bitwise_or, window, (1, 1), "VALID")
     return value, distinct & ~near
