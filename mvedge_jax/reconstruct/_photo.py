@@ -690,8 +690,8 @@ def photo_seeds(
     value = hyps[inner] + vertex * step
     value = _block_upsample(value, scale, (H, W))
     distinct = _block_upsample(distinct, scale, (H, W))
-    # Within ``min_distance`` (chessboard) of a support pixel: a separable window OR (the
-    # k×k `reduce_window` took 31 ms at 512², the two 1-D ones 0.4 ms).
+    # Within ``min_distance`` (chessboard) of a support pixel: a separable window OR (two 1-D
+    # windows: 0.4 ms at 512², against 31 ms for one k×k window on XLA's CPU backend).
     k = 2 * min_distance + 1
     near = jnp.pad(support, min_distance)
     for window in ((k, 1), (1, k)):
