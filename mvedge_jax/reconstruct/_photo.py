@@ -21,16 +21,16 @@ def _window_extrema(d: Array, radius: int) -> tuple[Array, Array]:
     slices, which XLA's CPU backend fuses and vectorises (a 512² map: 1.4 ms against 5.7 ms
     for a 5×5 ``lax.reduce_window``, 2.2 ms against 12.6 ms for 7×7; identical values).
     """
-    H, W = d.shape
     k = 2 * radius + 1
-    p = jnp.pad(d, radius, mode="edge")
-    hi, lo = p[:, :W], p[:, :W]
-    for s in range(1, k):
-        hi, lo = jnp.maximum(hi, p[:, s : s + W]), jnp.minimum(lo, p[:, s : s + W])
-    row_hi, row_lo = hi, lo
-    hi, lo = row_hi[:H], row_lo[:H]
-    for s in range(1, k):
-        hi, lo = jnp.maximum(hi, row_hi[s : s + H]), jnp.minimum(lo, row_lo[s : s + H])
+    lo = hi = jnp.pad(d, radius, mode="edge")
+    for axis in (1, 0):  # along the rows, then along the columns
+        n = d.shape[axis]
+        lo_p, hi_p = lo, hi
+        lo = lax.slice_in_dim(lo_p, 0, n, axis=axis)
+        hi = lax.slice_in_dim(hi_p, 0, n, axis=axis)
+        for s in range(1, k):
+            lo = jnp.minimum(lo, lax.slice_in_dim(lo_p, s, s + n, axis=axis))
+            hi = jnp.maximum(hi, lax.slice_in_dim(hi_p, s, s + n, axis=axis))
     return lo, hi
 
 

@@ -10,7 +10,6 @@ from scipy.ndimage import grey_dilation, grey_erosion
 
 from mvedge_jax.reconstruct import SharpenConfig, boundary_matte
 from mvedge_jax.reconstruct._centre import colour_guide
-from mvedge_jax.reconstruct._photo import _window_extrema
 from mvedge_jax.synthetic import make_scene
 
 FG, BG = 1.5, -0.5
@@ -133,16 +132,3 @@ def test_matte_needs_a_neighbour_on_the_chosen_side():
     assert out[6, 9] > 1.0
     # Off the edge row nothing changes left of the bar.
     np.testing.assert_array_equal(out[:6, :9], d[:6, :9])
-
-
-@pytest.mark.parametrize("radius", [1, 2, 3])
-def test_window_extrema_match_grey_morphology(radius):
-    """The separable window minimum and maximum equal SciPy's grey erosion and dilation
-    over the ``(2 radius + 1)²`` window with an edge-replicated border, on a non-square map
-    with ties."""
-    rng = np.random.default_rng(radius)
-    d = np.round(rng.normal(size=(23, 37)), 1).astype(np.float32)
-    lo, hi = _window_extrema(jnp.asarray(d), radius)
-    k = 2 * radius + 1
-    np.testing.assert_array_equal(np.asarray(lo), grey_erosion(d, size=(k, k), mode="nearest"))
-    np.testing.assert_array_equal(np.asarray(hi), grey_dilation(d, size=(k, k), mode="nearest"))

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from reconstruct_helpers import cross_hair, interior
-from scipy.ndimage import grey_dilation
+from scipy.ndimage import grey_dilation, grey_erosion
 
 from mvedge_jax.io import load_light_field
 from mvedge_jax.lightfield import ssim_map
@@ -21,6 +21,7 @@ from mvedge_jax.reconstruct import (
     photo_sweep,
     select_centre,
 )
+from mvedge_jax.reconstruct._photo import _window_extrema
 
 
 def test_photo_cost_is_lowest_at_the_truth(small_scene):
@@ -328,3 +329,16 @@ def test_photo_sweep_bad_steps(small_scene):
             photo_sweep(lf.centre_gt, lf.centre_view, views, offsets, steps=steps)
     with pytest.raises(ValueError, match="sweep_steps"):
         SharpenConfig(sweep_steps=4)
+
+
+@pytest.mark.parametrize("radius", [1, 2, 3])
+def test_window_extrema_match_grey_morphology(radius):
+    """The separable window minimum and maximum equal SciPy's grey erosion and dilation
+    over the ``(2 radius + 1)²`` window with an edge-replicated border, on a non-square map
+    with ties."""
+    rng = np.random.default_rng(radius)
+    d = np.round(rng.normal(size=(23, 37)), 1).astype(np.float32)
+    lo, hi = _window_extrema(jnp.asarray(d), radius)
+    k = 2 * radius + 1
+    np.testing.assert_array_equal(np.asarray(lo), grey_erosion(d, size=(k, k), mode="nearest"))
+    np.testing.assert_array_equal(np.asarray(hi), grey_dilation(d, size=(k, k), mode="nearest"))
