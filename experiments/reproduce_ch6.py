@@ -192,7 +192,7 @@ def sensitivity(cache: Path | None) -> dict:
     configs = {"default": ReconstructConfig()}
     for name, values in SENSITIVITY.items():
         for v in values:
-            configs[f"{name}={v:g}"] = replaced({name: v})
+            configs[f"{name}={_fmt(v)}"] = replaced({name: v})
     scores = _score_scenes(configs, cache)
     scenes = list(scores)
     head = f"{'config':<26}" + "".join(f"{s[:11]:>12}" for s in scenes) + f"{'geo-mean':>10}"
@@ -209,9 +209,10 @@ def sensitivity(cache: Path | None) -> dict:
     return scores
 
 
-def _static_numeric_paths(config=None, prefix: str = "") -> dict[str, str]:
-    """Dotted paths of the static ``int``/``float`` fields of `ReconstructConfig` (relative to
-    it) and their kinds; a grid over them recompiles the sharpening once per value."""
+def _static_grid_paths(config=None, prefix: str = "") -> dict[str, str]:
+    """Dotted paths of the static ``int``/``float``/``str`` fields of `ReconstructConfig`
+    (relative to it) and their kinds; a grid over them recompiles the sharpening once per
+    value."""
     import dataclasses
 
     from mvedge_jax._fields import field_spec
@@ -222,19 +223,25 @@ def _static_numeric_paths(config=None, prefix: str = "") -> dict[str, str]:
         value = getattr(config, f.name)
         spec = field_spec(f)
         if isinstance(value, eqx.Module):
-            out.update(_static_numeric_paths(value, f"{prefix}{f.name}."))
-        elif spec is not None and spec.kind in ("int", "float"):
+            out.update(_static_grid_paths(value, f"{prefix}{f.name}."))
+        elif spec is not None and spec.kind in ("int", "float", "str"):
             out[f"{prefix}{f.name}"] = spec.kind
     return out
 
 
-def parse_grid(text: str) -> dict[str, tuple[float, ...]]:
+def _fmt(value) -> str:
+    """A grid value as it appears in a label: numbers ``:g``, strings as they are."""
+    return value if isinstance(value, str) else f"{value:g}"
+
+
+def parse_grid(text: str) -> dict[str, tuple]:
     """``"name=v1,v2;name2=v3,v4"`` → ``{name: (v1, v2), name2: (v3, v4)}`` (array fields of
-    `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``, or its static numeric
-    fields, e.g. ``sharpen.wmf_slope_baseline``: those recompile per value)."""
+    `ReconstructConfig` by dotted path, e.g. ``sharpen.wmf_sigma``, or its static numeric or
+    string fields, e.g. ``sharpen.wmf_slope_baseline``, ``sharpen.matte_colour``: those
+    recompile per value)."""
     prefix = "reconstruct."
     fields = {p.removeprefix(prefix) for p in hyperparameter_paths() if p.startswith(prefix)}
-    statics = _static_numeric_paths()
+    statics = _static_grid_paths()
     grid = {}
     for part in text.split(";"):
         name, _, values = part.partition("=")
@@ -242,10 +249,14 @@ def parse_grid(text: str) -> dict[str, tuple[float, ...]]:
         if (name not in fields and name not in statics) or not values:
             raise ValueError(
                 f"bad grid entry {part!r}: use NAME=V1,V2 with a ReconstructConfig array field "
-                "(a dotted path such as sharpen.wmf_sigma) or static numeric field"
+                "(a dotted path such as sharpen.wmf_sigma) or static numeric or string field"
             )
-        cast = int if statics.get(name) == "int" else float
-        grid[name] = tuple(cast(float(v)) for v in values.split(","))
+        kind = statics.get(name)
+        if kind == "str":
+            grid[name] = tuple(v.strip() for v in values.split(","))
+        else:
+            cast = int if kind == "int" else float
+            grid[name] = tuple(cast(float(v)) for v in values.split(","))
     return grid
 
 
@@ -255,7 +266,7 @@ def leave_one_out(cache: Path | None, grid: dict | None = None, criterion: str =
     combos = list(itertools.product(*grid.values()))
     configs = {"default": ReconstructConfig()}
     for combo in combos:
-        label = ", ".join(f"{n}={v:g}" for n, v in zip(names, combo, strict=True))
+        label = ", ".join(f"{n}={_fmt(v)}" for n, v in zip(names, combo, strict=True))
         configs[label] = replaced(dict(zip(names, combo, strict=True)))
     scores = _score_scenes(configs, cache)
     scenes = list(scores)

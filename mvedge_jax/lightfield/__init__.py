@@ -1,6 +1,8 @@
 """Light-field container, EPI slicing, colour conversion and view warping."""
 
+from ._colour import linear_to_srgb as linear_to_srgb
 from ._colour import rgb_to_lab as rgb_to_lab
+from ._colour import srgb_to_linear as srgb_to_linear
 from ._lightfield import LightField as LightField
 from ._lightfield import horizontal_epis as horizontal_epis
 from ._lightfield import vertical_epis as vertical_epis

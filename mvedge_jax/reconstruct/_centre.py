@@ -9,7 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ..edges import EdgeSet
-from ..lightfield import rgb_to_lab
+from ..lightfield import rgb_to_lab, srgb_to_linear
 from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 from ._photo import _block_upsample
@@ -19,12 +19,15 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 def colour_guide(image: Float[ArrayLike, "... 3"], colour_space: str) -> Float[Array, "... 3"]:
-    """The guide image of the smoothness terms: CIELAB / 100 (``"lab"``) or RGB."""
+    """A guide image: CIELAB / 100 (``"lab"``), the sRGB values as given (``"rgb"``) or
+    linear light (``"linear"``, `srgb_to_linear`)."""
     image = jnp.asarray(image)
     if not jnp.issubdtype(image.dtype, jnp.floating):
         image = image.astype(jnp.float32)
     if colour_space == "lab":
         return rgb_to_lab(image) / 100.0
+    if colour_space == "linear":
+        return srgb_to_linear(image)
     return image
 
 

@@ -12,6 +12,7 @@ from ..solve import SolverConfig
 from ._wmf import WEIGHT_TYPES
 
 COLOUR_SPACES = ("lab", "rgb")
+MATTE_COLOURS = ("lab", "rgb", "linear")
 HOLE_FILLS = ("solve", "background")
 FILL_CHOICES = ("colour", "farthest")
 MERGES = ("photo", "mean")
@@ -79,7 +80,8 @@ class SharpenConfig(eqx.Module):
         matte_jump: (threshold) disparity range of a window that marks a depth discontinuity for
             `boundary_matte` (pixels per view step).
         matte_min_separation: (threshold) `boundary_matte` decides only where the foreground and
-            background colours differ by at least this (guide units).
+            background colours differ by at least this (in the units of ``matte_colour``:
+            linear light in [0, 1] by default).
         matte_impure_weight: (threshold) weight of window pixels on a discontinuity in the colour
             means.
         matte_max_residual: (threshold) `boundary_matte` decides only where the pixel's
@@ -154,6 +156,11 @@ class SharpenConfig(eqx.Module):
             boundaries are only pixel-accurate); ~20 ms per 512² view.
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
+        matte_colour: the colours of its two-colour mixture model: ``"linear"`` (sRGB
+            decoded to linear light, where a pixel on an occlusion edge is the area-weighted
+            mean of the two surfaces' colours, as in a camera or an anti-aliased render),
+            ``"lab"`` (CIELAB / 100) or ``"rgb"`` (the encoded values). Its
+            ``matte_min_separation`` is in the same units.
 
     Raises:
         TypeError, ValueError: on construction, for a value of the wrong type or out of
@@ -169,7 +176,7 @@ class SharpenConfig(eqx.Module):
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     refine_near_weight: Array = hyperparameter(2.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
-    matte_min_separation: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
+    matte_min_separation: Array = hyperparameter(0.15, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
@@ -199,6 +206,7 @@ class SharpenConfig(eqx.Module):
     matte_views: bool = static(True)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
+    matte_colour: str = static("linear", choices=MATTE_COLOURS)
 
     def __check_init__(self):
         check_fields(self)

@@ -47,15 +47,18 @@ def boundary_matte(
     jit/vmap-able. Not differentiable in the side chosen (a selection); the output is
     piecewise a weighted mean of the input.
 
-    Not in the thesis (it sharpens with the weighted median alone). Measured on the
-    synthetic default scene (box-filtered colours, centre-sampled ground truth) inside
-    `reconstruct` (photo-consistent snapping → this → weighted median): centre view MSE×100
-    0.92 → 0.37; on HCI backgammon 1.44 → 1.31 and antinous 8.00 → 8.13.
+    The mixture is linear in light, so the model holds for a guide in linear light
+    (`srgb_to_linear` of the sRGB values; `SharpenConfig.matte_colour`): in CIELAB or in the
+    encoded values the line from ``B`` to ``F`` is bent and mostly-background pixels can look
+    like foreground.
+
+    Not in the thesis (it sharpens with the weighted median alone); measurements in
+    docs/ACCURACY.md.
 
     Args:
         disparity: ``(H, W)`` float disparity (pixels per view step; larger = nearer).
-        guide: ``(H, W, C)`` float colour of the same view (e.g. CIELAB / 100, see
-            `ReconstructConfig.colour_space`).
+        guide: ``(H, W, C)`` float colour of the same view (linear light for the mixture
+            model to hold; see `SharpenConfig.matte_colour`).
         radius: window radius (static int >= 1).
         jump: disparity range (pixels per view step) that marks a discontinuity.
         spatial_sigma: Gaussian distance scale of the colour means, pixels (static float).

@@ -429,7 +429,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
-        sharp = _matte(sharp, colour_guide(views[rc, cc], config.colour_space), config)
+        sharp = _matte(sharp, colour_guide(views[rc, cc], sc.matte_colour), config)
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
         offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)
@@ -722,9 +722,12 @@ def _propagate(
         r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
+        if config.sharpen.matte_colour == config.colour_space:
+            matte_guides = guides[r_j, c_j]
+        else:
+            matte_guides = colour_guide(views[r_j, c_j], config.sharpen.matte_colour)
         matted = lax.map(
-            lambda pair: _matte(pair[0], pair[1], config),
-            (disparity[r_j, c_j], guides[r_j, c_j]),
+            lambda pair: _matte(pair[0], pair[1], config), (disparity[r_j, c_j], matte_guides)
         )
         disparity = disparity.at[r_j, c_j].set(matted)
     return disparity, cross_h, cross_v, residual

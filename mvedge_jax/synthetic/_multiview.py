@@ -6,7 +6,8 @@ image pixel centres sit at integers (this project's convention; the COLMAP model
 `write_multiview_scene` adds COLMAP's 0.5). A pixel's ray ``C + s Rᵀ K⁻¹ (x, y, 1)`` meets the
 nearest rectangle at ``s``, which is also the camera-space depth ``z`` of the hit (the ray's
 camera-space direction has ``z = 1``). Colours are averaged over ``supersample²`` sub-pixel
-rays (anti-aliased texture and occlusion edges); depth is that of the pixel-centre ray (exact).
+rays in linear light and encoded as sRGB (anti-aliased texture and occlusion edges, as a
+camera integrates light over its pixel); depth is that of the pixel-centre ray (exact).
 
 References:
     Thesis Sec. 7.2.2 (unstructured five-camera scenes, sparse COLMAP points as input).
@@ -30,6 +31,7 @@ from ..io import (
     write_pfm,
     write_png,
 )
+from ..lightfield import linear_to_srgb, srgb_to_linear
 
 _N_WAVES = 5
 
@@ -214,8 +216,8 @@ def render_view(
         for ox in offs:
             r = np.stack([xs + ox, ys + oy, np.ones_like(xs)], -1) @ Kinv_T @ R
             _, idx, a, b = trace(rects, C, r)
-            col += _shade(rects, idx, a, b)
-    return (col / ss**2).astype(np.float32), depth
+            col += np.asarray(srgb_to_linear(np.clip(_shade(rects, idx, a, b), 0.0, 1.0)))
+    return np.asarray(linear_to_srgb(col / ss**2), np.float32), depth
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,8 +14,9 @@ A pixel ``(X', Y')`` of the view at offset ``(dr, dc)`` sees the point of a surf
 form ``d = (a + b X' + c Y') / (1 - b dc - c dr)``, ``X = X' + dc d``, ``Y = Y' + dr d``.
 Among the surfaces whose support contains their point, the largest disparity (the nearest)
 is visible. Ground truth is that disparity at the pixel centre (exact, no interpolation);
-colours are averaged over ``supersample²`` sub-pixel samples (anti-aliasing of both texture
-edges and occlusion boundaries).
+colours are averaged over ``supersample²`` sub-pixel samples in linear light and encoded as
+sRGB (anti-aliasing of both texture edges and occlusion boundaries, as a camera integrates
+light over its pixel: textures are sRGB values).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..lightfield import LightField, view_offsets
+from ..lightfield import LightField, linear_to_srgb, srgb_to_linear, view_offsets
 
 WHOLE, RECT, DISC = 0, 1, 2
 N_MODES = 6  # smooth colour-noise sinusoids per surface
@@ -204,11 +205,11 @@ def _render_geometry(p, offsets, *, H: int, W: int, ss: int):
 
 @jax.jit
 def _render_colour(p, w, X, Y, offsets):
-    """Mean texture colour over the sub-pixel axis 1: ``(N, ss², H, W)`` → ``(N, H, W, 3)``,
-    the views at ``offsets (N, 2)``."""
+    """Mean texture colour over the sub-pixel axis 1, in linear light, encoded as sRGB:
+    ``(N, ss², H, W)`` → ``(N, H, W, 3)``, the views at ``offsets (N, 2)``."""
     dr = offsets[:, 0, None, None, None]
     dc = offsets[:, 1, None, None, None]
-    return _texture(p, w, X, Y, dr, dc).mean(axis=1)
+    return linear_to_srgb(srgb_to_linear(_texture(p, w, X, Y, dr, dc)).mean(axis=1))
 
 
 def _render(p, offsets, *, H: int, W: int, ss: int, chunk_pixels: int = 1 << 22):

@@ -1,4 +1,5 @@
-"""rgb_to_lab: agreement with OpenCV, shapes, dtype, jit and gradients."""
+"""rgb_to_lab, srgb_to_linear, linear_to_srgb: agreement with OpenCV and the sRGB standard,
+shapes, dtype, jit and gradients."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.test_util import check_grads
 
-from mvedge_jax.lightfield import rgb_to_lab
+from mvedge_jax.lightfield import linear_to_srgb, rgb_to_lab, srgb_to_linear
 
 
 def _samples(key, n=4096):
@@ -62,3 +63,26 @@ def test_gradients_float64(x64, key):
     assert f(rgb).dtype == jnp.float64
     g = jax.jit(jax.grad(lambda x: rgb_to_lab(x).sum()))(np.zeros((2, 3)))
     assert np.isfinite(np.asarray(g)).all()  # black has finite gradients
+
+
+def test_srgb_transfer_curve_values_and_round_trip(key):
+    # IEC 61966-2-1: the linear segment below 0.04045 (0.0031308 in linear light), and
+    # mid grey 0.5 -> 0.214041.
+    x = np.array([0.0, 0.02, 0.04045, 0.5, 1.0], np.float32)
+    lin = np.asarray(jax.jit(srgb_to_linear)(x))
+    np.testing.assert_allclose(lin, [0.0, 0.02 / 12.92, 0.0031308, 0.2140411, 1.0], atol=2e-6)
+    rgb = _samples(key)
+    back = np.asarray(jax.jit(lambda v: linear_to_srgb(srgb_to_linear(v)))(rgb))
+    np.testing.assert_allclose(back, rgb, atol=2e-6)
+    assert np.all(np.diff(np.asarray(srgb_to_linear(jnp.linspace(0, 1, 1001)))) > 0)
+    # The linear-light mean of black and white is brighter than the encoded mean.
+    assert float(linear_to_srgb(0.5 * (srgb_to_linear(0.0) + srgb_to_linear(1.0)))) > 0.73
+
+
+def test_srgb_transfer_gradients_float64(x64, key):
+    rgb = np.asarray(0.1 + 0.8 * jax.random.uniform(key, (4, 3), dtype=jnp.float64))
+    dark = np.array([[0.001, 0.02, 0.03]], np.float64)
+    for f in (jax.jit(srgb_to_linear), jax.jit(linear_to_srgb)):
+        check_grads(f, (rgb,), order=1, modes=("rev",), eps=1e-6)
+        check_grads(f, (dark,), order=1, modes=("rev",), eps=1e-7)
+        assert f(rgb).dtype == jnp.float64

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import grey_dilation, grey_erosion
 
+from mvedge_jax.lightfield import linear_to_srgb, srgb_to_linear
 from mvedge_jax.reconstruct import SharpenConfig, boundary_matte
 from mvedge_jax.reconstruct._centre import colour_guide
 from mvedge_jax.synthetic import make_scene
@@ -37,6 +38,40 @@ def test_matte_puts_the_edge_on_the_covered_pixel_centres(edge, shift):
     d[:, :2], d[:, -2:] = FG, BG
     out = np.asarray(jax.jit(boundary_matte)(jnp.asarray(d), jnp.asarray(img)))
     np.testing.assert_allclose(out, gt, atol=1e-5)
+
+
+def _slanted_edge_linear_light(size: int = 32, slope: float = 0.13):
+    """A near-horizontal depth edge (foreground above), crossing the pixel centres at every
+    offset along its length, between a grey foreground and a dark blue-green background
+    (backgammon's colours): the centre-sampled ground truth, each pixel's exact foreground
+    coverage, and the colours mixed in linear light by that coverage, encoded as sRGB (as
+    a camera or a renderer does)."""
+    y = np.arange(size, dtype=np.float64)[:, None]
+    x = np.arange(size, dtype=np.float64)[None, :]
+    # Edge y = y0 + slope x; a pixel's box [y - 1/2, y + 1/2] is covered above the edge
+    # (averaging the coverage over the box's width: the edge is linear across it).
+    y_edge = size / 2 + 0.37 + slope * (x - size / 2)
+    cover = np.clip(y_edge - (y - 0.5), 0.0, 1.0)
+    gt = np.where(y < y_edge, FG, BG).astype(np.float32)
+    fg_col, bg_col = np.array([0.5, 0.5, 0.5]), np.array([0.08, 0.25, 0.33])
+    lin = cover[..., None] * np.asarray(srgb_to_linear(fg_col))
+    lin = lin + (1 - cover[..., None]) * np.asarray(srgb_to_linear(bg_col))
+    return gt, cover, np.asarray(linear_to_srgb(lin), np.float32)
+
+
+def test_matte_in_linear_light_decides_mixtures_made_in_linear_light():
+    gt, cover, img = _slanted_edge_linear_light()
+    clear = np.abs(cover - 0.5) > 0.02  # away from near-ties
+    inner = (slice(3, -3), slice(3, -3))
+    for shift in (-1, 1):  # the map's edge one pixel too low (fattened) or too high
+        d = np.roll(gt, shift, axis=0)
+        lin = np.asarray(boundary_matte(jnp.asarray(d), colour_guide(img, "linear")))
+        wrong = (np.abs(lin - gt) > 0.5) & clear
+        assert not wrong[inner].any(), np.argwhere(wrong)
+        # The same decisions made on CIELAB values: the encoding bends the mixture line,
+        # and pixels that are mostly background look like foreground.
+        lab = np.asarray(boundary_matte(jnp.asarray(d), colour_guide(img, "lab")))
+        assert ((np.abs(lab - gt) > 0.5) & clear)[inner].sum() >= 2
 
 
 def test_matte_fixes_fattened_boundaries_of_a_synthetic_scene():

@@ -27,13 +27,14 @@ def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
 @pytest.mark.parametrize(
     "kwargs, bound, centre_bound",
     [
-        # Measured (5x5x64x64, disparity in [-1, 1], GT-derived edge model): worst view
-        # 1.44 (mean 0.93) with the defaults (snapping, matting and weighted median, low-
-        # confidence reprojections as holes, background fill; before the hole handling
-        # 2.25). The thesis' path (no sharpening, every landed value is data, weak hole
-        # prior): worst 1.75 (mean 1.04). Without sharpening, the hole handling alone costs
-        # here (worst 2.25): fattened boundaries reach into disocclusions.
-        (dict(), 1.8, 1.6),
+        # Measured (5x5x64x64, disparity in [-1, 1], colours mixed in linear light,
+        # GT-derived edge model): worst view 1.96 (mean 1.41, centre 1.38) with the defaults
+        # (snapping, matting in linear light and weighted median, low-confidence
+        # reprojections as holes, background fill); matting CIELAB values gives 1.32 (0.98,
+        # 1.22) on this scene, but not on average over the leave-one-out scenes
+        # (docs/ACCURACY.md). The thesis' path (no sharpening, every landed value is data,
+        # weak hole prior) is bounded below.
+        (dict(), 2.2, 1.6),
         (
             dict(
                 sharpen=SharpenConfig(

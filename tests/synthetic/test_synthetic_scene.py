@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from mvedge_jax.lightfield import LightField, backward_warp, forward_project
+from mvedge_jax.lightfield import (
+    LightField,
+    backward_warp,
+    forward_project,
+    linear_to_srgb,
+    srgb_to_linear,
+)
 from mvedge_jax.synthetic import (
     DISC,
     RECT,
@@ -209,6 +215,31 @@ def test_render_surfaces_by_hand():
     np.testing.assert_allclose(g[1, 1, 10, 10], 1 + 0.05 * (10 - 15), rtol=1e-6)
     np.testing.assert_allclose(g[0, 1, 10, 10], (1 + 0.05 * (10 - 15)) / 1.05, rtol=1e-6)
     np.testing.assert_allclose(np.asarray(lf.views[1, 1, 15, 20]), 0.9, atol=1e-6)
+
+
+def test_occlusion_edges_mix_in_linear_light():
+    """A pixel half covered by a near rectangle is the mean of the two colours in linear
+    light (as a camera integrates light), encoded as sRGB, not the mean of the encoded
+    values."""
+    fg, bg = 0.9, 0.1
+    surfaces = [
+        Surface(plane=(0.0, 0.0, 0.0), kind=WHOLE, base=(bg, bg, bg)),
+        # Left edge at X = 0: through the centres of column 10 (W = 21).
+        Surface(
+            plane=(1.0, 0.0, 0.0),
+            kind=RECT,
+            centre=(5.0, 0.0),
+            half_size=(5.0, 20.0),
+            base=(fg, fg, fg),
+        ),
+    ]
+    lf = render_surfaces(surfaces, grid=(3, 3), size=(9, 21), supersample=2)
+    centre = np.asarray(lf.views[1, 1])
+    lin = 0.5 * (np.asarray(srgb_to_linear(fg)) + np.asarray(srgb_to_linear(bg)))
+    np.testing.assert_allclose(centre[4, 10], float(linear_to_srgb(lin)), atol=1e-5)
+    assert abs(float(centre[4, 10, 0]) - 0.5 * (fg + bg)) > 0.1
+    np.testing.assert_allclose(centre[4, 9], bg, atol=1e-5)
+    np.testing.assert_allclose(centre[4, 11], fg, atol=1e-5)
 
 
 def test_bad_inputs():
