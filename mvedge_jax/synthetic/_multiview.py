@@ -216,7 +216,7 @@ def render_view(
         for ox in offs:
             r = np.stack([xs + ox, ys + oy, np.ones_like(xs)], -1) @ Kinv_T @ R
             _, idx, a, b = trace(rects, C, r)
-            col += np.asarray(srgb_to_linear(np.clip(_shade(rects, idx, a, b), 0.0, 1.0)))
+            col += np.asarray(srgb_to_linear(_shade(rects, idx, a, b)))
     return np.asarray(linear_to_srgb(col / ss**2), np.float32), depth
 
 
