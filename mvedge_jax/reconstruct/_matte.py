@@ -109,8 +109,11 @@ def boundary_matte(
             gs = g_p[r + a : r + a + H, r + b : r + b + W]
             w = s * p_p[r + a : r + a + H, r + b : r + b + W]
             fg = ds > mid
+            # Two selections, not ``w - w_f``: a compiler may contract the difference into
+            # a fused multiply-add and leave the rounding error of ``w`` (~1e-17) as the
+            # weight of an empty side, which then passes the ``wb > 0`` test.
             w_f = jnp.where(fg, w, 0.0)
-            w_b = w - w_f
+            w_b = jnp.where(fg, 0.0, w)
             wf, wb = wf + w_f, wb + w_b
             df, db = df + w_f * ds, db + w_b * ds
             cf, cb = cf + w_f[..., None] * gs, cb + w_b[..., None] * gs

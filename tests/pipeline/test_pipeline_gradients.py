@@ -11,7 +11,6 @@ differences are not limited by the solver's tolerance.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -61,22 +60,6 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
     )
 
 
-def _decimal_float64(config: PipelineConfig) -> PipelineConfig:
-    """Every floating leaf as float64 of its decimal value (7 significant digits). The
-    defaults' leaves are made in float32 when the library is imported before x64 is on; at
-    their float32 roundings reverse mode and the finite differences of this scene's chain
-    disagree by 0.3-5 % on every field (the cause is not known), at the decimal values they
-    agree."""
-
-    def cast(x):
-        if eqx.is_array(x) and jnp.issubdtype(x.dtype, jnp.floating):
-            dec = np.vectorize(lambda v: float(f"{float(v):.7g}"))(np.asarray(x))
-            return jnp.asarray(dec, jnp.float64)
-        return x
-
-    return jax.tree.map(cast, config)
-
-
 @pytest.fixture(scope="module")
 def x64_module():
     jax.config.update("jax_enable_x64", True)
@@ -98,7 +81,7 @@ def scene(x64_module):
 def chain(scene):
     """``(values0, loss, gradient)``: the field values, the jitted loss and its gradient."""
     lf, views, gt = scene
-    config = _decimal_float64(_tight(smooth_config()))
+    config = _tight(smooth_config())
     d_max = resolve_d_max(config.edges, lf.disparity_range)
     values0 = {p: jnp.asarray(get_path(config, p), jnp.float64) for p in SMOOTH_PATHS}
 

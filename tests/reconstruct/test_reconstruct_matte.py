@@ -167,3 +167,32 @@ def test_matte_needs_a_neighbour_on_the_chosen_side():
     assert out[6, 9] > 1.0
     # Off the edge row nothing changes left of the bar.
     np.testing.assert_array_equal(out[:6, :9], d[:6, :9])
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("mode", ["jit", "grad"])
+def test_matte_leaves_a_pixel_alone_whose_window_has_one_side(dtype, mode, x64):
+    """A pixel far below every other pixel of its window (an outlier of the input) is the
+    window's only background pixel; the mean background colour is undefined without it, so
+    it keeps its value, also when the matte is compiled with a backward pass (where XLA
+    rounds the products of the window weights differently)."""
+    rng = np.random.default_rng(3)
+    H, W = 9, 9
+    d = np.tile(np.linspace(-0.3, 0.0, W), (H, 1))
+    d[4, 4] = -0.7
+    img = rng.uniform(0.0, 1.0, (H, W, 3))
+    d, img = jnp.asarray(d, dtype), jnp.asarray(img, dtype)
+
+    def matte(x):
+        return boundary_matte(x, img, radius=2, spatial_sigma=1.3, impure_weight=0.05)
+
+    if mode == "jit":
+        out = jax.jit(matte)(d)
+    else:
+
+        def loss(x):
+            m = matte(x)
+            return jnp.sum(m**2), m
+
+        (_, out), _ = jax.jit(jax.value_and_grad(loss, has_aux=True))(d)
+    assert float(out[4, 4]) == float(d[4, 4])
