@@ -12,7 +12,7 @@ from ..solve import SolverConfig
 from ._wmf import WEIGHT_TYPES
 
 COLOUR_SPACES = ("lab", "rgb")
-MATTE_COLOURS = ("lab", "rgb", "linear")
+MATTE_COLOURS = (*COLOUR_SPACES, "linear")  # every guide of `colour_guide`
 HOLE_FILLS = ("solve", "background")
 FILL_CHOICES = ("colour", "farthest")
 MERGES = ("photo", "mean")
