@@ -16,6 +16,8 @@ from importlib.metadata import PackageNotFoundError
 from importlib.metadata import version as _version
 
 from ._cache import enable_compilation_cache as enable_compilation_cache
+from ._determinism import deterministic_gpu_requested as deterministic_gpu_requested
+from ._determinism import request_deterministic_gpu as request_deterministic_gpu
 
 enable_compilation_cache()
 
@@ -58,7 +60,13 @@ _EXPORTS = {
     "surface_vectors": "surface",
 }
 
-__all__ = ["__version__", "enable_compilation_cache", *sorted(_EXPORTS)]
+__all__ = [
+    "__version__",
+    "deterministic_gpu_requested",
+    "enable_compilation_cache",
+    "request_deterministic_gpu",
+    *sorted(_EXPORTS),
+]
 
 
 def __getattr__(name: str):

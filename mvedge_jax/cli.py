@@ -113,12 +113,27 @@ def _echo_warnings(messages) -> None:
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
-def main() -> None:
+@click.option(
+    "--deterministic",
+    is_flag=True,
+    envvar="MVEDGE_DETERMINISTIC",
+    help="On a GPU, use XLA's deterministic kernels (XLA_FLAGS=--xla_gpu_deterministic_ops"
+    "=true), so that repeated runs give the same bits, as on the CPU; may be slower on a "
+    "GPU, no effect on the CPU. Also MVEDGE_DETERMINISTIC=1.",
+)
+def main(deterministic: bool) -> None:
     """mvedge: multi-view edge depth for 4D light fields (JAX).
 
     Compiled stages are cached on disk ($MVEDGE_JAX_CACHE, default ~/.cache/mvedge_jax;
     MVEDGE_JAX_CACHE=off disables it).
     """
+    if deterministic:
+        from ._determinism import request_deterministic_gpu
+
+        try:
+            request_deterministic_gpu()
+        except RuntimeError as e:
+            raise click.ClickException(str(e)) from None
     _check_platform()
 
 
@@ -329,9 +344,14 @@ def _device_line() -> str:
     from .pipeline import device_info
 
     d = device_info()
+    determinism = (
+        ""
+        if d["backend"] == "cpu"
+        else (", deterministic kernels" if d["deterministic"] else ", nondeterministic kernels")
+    )
     return (
         f"device: {d['device']} (backend {d['backend']}, {d['device_count']} device(s), "
-        f"jax {d['jax_version']})"
+        f"jax {d['jax_version']}{determinism})"
     )
 
 

@@ -21,6 +21,15 @@ jax.config.update(
 )
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
+# On a GPU, scatter-adds sum in no fixed order, so two evaluations of the chain differ and its
+# finite differences become noise; the tests compare against exact values and finite
+# differences, so they ask for XLA's deterministic kernels (no effect on the CPU). Before any
+# JAX computation: the flag is read when the backend starts. (After the cache setup above:
+# importing mvedge_jax leaves a configured cache folder as it is.)
+from mvedge_jax import request_deterministic_gpu  # noqa: E402
+
+request_deterministic_gpu()
+
 DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 
 

@@ -197,15 +197,21 @@ def device_info() -> dict:
 
     Returns:
         ``backend`` (e.g. ``"cpu"``, ``"gpu"``), ``device`` (its kind, e.g. ``"cpu"`` or
-        ``"NVIDIA H100 80GB HBM3"``), ``device_count``, ``jax_version``, ``python``.
+        ``"NVIDIA H100 80GB HBM3"``), ``device_count``, ``jax_version``, ``python``, and
+        ``deterministic``: whether repeated runs give the same bits (always on the CPU; on a
+        GPU only with `mvedge_jax.request_deterministic_gpu`).
     """
+    from .._determinism import deterministic_gpu_requested
+
     devs = jax.devices()
+    backend = jax.default_backend()
     return {
-        "backend": jax.default_backend(),
+        "backend": backend,
         "device": str(getattr(devs[0], "device_kind", devs[0].platform)),
         "device_count": len(devs),
         "jax_version": jax.__version__,
         "python": platform.python_version(),
+        "deterministic": backend == "cpu" or deterministic_gpu_requested(),
     }
 
 
