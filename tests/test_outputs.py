@@ -128,6 +128,7 @@ def test_metrics_json_is_strict_and_has_provenance(written):
     assert p["scale"] == 0.125 and "scaled by 0.125" in p["units"]
     assert p["seed"] == 7 and p["mvedge_jax_version"] and p["jax_version"]
     assert p["backend"] == "cpu" and p["device"]
+    assert p["deterministic"] is True  # CPU runs always are
     cfg = p["config"]
     assert cfg["_type"] == "PipelineConfig"
     assert set(cfg) >= {"edges", "surface", "reconstruct", "optimize"}
