@@ -89,7 +89,8 @@ def trilateral_filter(
     ``f(p_d) = Σ_q N_σs(|p_s - q_s|) N_σd(p_d - q_d) N_σc(|p_c - q_c|) q_d / W`` over the valid
     visible points ``q`` (both directions) in a ``(2r+1)^2`` window,
     ``r = refine.trilateral_radius``. Points are rasterised to the centre-view pixel grid (one
-    per pixel and EPI direction) and the filter runs densely on the grids: a ``lax.fori_loop``
+    per pixel and EPI direction: of several points on one pixel, the one of the highest index)
+    and the filter runs densely on the grids: a ``lax.fori_loop``
     over the window offsets, each step a few element-wise operations on ``(2, 2, H, W)``
     arrays. Colour distances use LAB / 100.
 
@@ -112,7 +113,12 @@ def trilateral_filter(
     ch = edges.direction.astype(jnp.int32)
     ys = jnp.where(use, yi, H + 1)  # out of bounds: not rasterised
     dt = vals.dtype
-    grid = jnp.zeros((2, H, W, 5), dt).at[ch, ys, xi].set(vals, mode="drop")
+    # The point kept on a pixel is chosen by an integer max, not left to the order in which a
+    # scatter applies repeated indices (unspecified, and not fixed from run to run on a GPU).
+    n_pts = vals.shape[0]
+    last = jnp.full((2, H, W), -1, jnp.int32)
+    last = last.at[ch, ys, xi].max(jnp.arange(n_pts, dtype=jnp.int32), mode="drop")
+    grid = jnp.where((last >= 0)[..., None], vals[jnp.maximum(last, 0)], 0.0).astype(dt)
     p = jnp.moveaxis(grid, -1, 0)  # (5, 2, H, W)
     q = jnp.pad(p, ((0, 0), (0, 0), (r, r), (r, r)))
     a_s = 0.5 / config.refine.sigma_s**2

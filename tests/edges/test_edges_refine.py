@@ -6,6 +6,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from mvedge_jax.edges import EdgeConfig, EdgeRefineConfig, EdgeSet, OutlierConfig, detect_edges
 from mvedge_jax.edges._global import reject_outliers, trilateral_filter
@@ -93,6 +94,21 @@ def test_outlier_agreement_test_keeps_isolated_points_and_drops_disagreeing_ones
     keep = np.asarray(jax.jit(lambda e, lb: reject_outliers(e, lb, (15, 15), cfg))(e, labels))
     # cluster: 6 of 7 neighbours agree; label 30: 1 of 7; isolated: 1 of 1.
     assert keep.tolist() == [True] * 6 + [False, True]
+
+
+@pytest.mark.parametrize("order", [(0, 1, 2), (2, 1, 0)])
+def test_trilateral_filter_keeps_the_highest_index_point_of_a_pixel(order):
+    """Three points of one EPI direction on one pixel (alone in its window): the grid holds
+    the one of the highest index, whatever order the scatter would apply them in, and every
+    point on the pixel reads its value; a point of the other direction keeps its own."""
+    d = np.array([0.2, 0.9, 1.6])[list(order)]
+    xs = [5.2, 4.9, 5.0, 5.1]
+    ys = [5.0, 5.3, 4.8, 5.0]
+    e = _edges(xs, ys, [*d, -0.7], np.ones(4), direction=[0, 0, 0, 1])
+    cfg = EdgeConfig(refine=EdgeRefineConfig(trilateral_radius=2))
+    f = np.asarray(jax.jit(lambda e: trilateral_filter(e, (12, 12), cfg))(e))
+    np.testing.assert_allclose(f[:3], d[2], atol=1e-6)
+    np.testing.assert_allclose(f[3], -0.7, atol=1e-6)
 
 
 def test_trilateral_filter_smooths_within_surfaces_only():
