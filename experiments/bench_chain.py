@@ -2,14 +2,17 @@
 
 Usage::
 
-    python experiments/bench_chain.py [SCENE ...] [--repeat 3] [--optimize] [--json OUT.json]
+    python experiments/bench_chain.py [SCENE ...] [--repeat 3] [--optimize] [--deterministic]
+        [--json OUT.json]
 
 ``SCENE`` is a light-field folder (default: HCI backgammon under ``$MVEDGE_DATA`` or
 ``../shared/data``) or ``synthetic`` (the embedded default light field, 9×9×160²). For every
 scene, in one process: a first call of `estimate_disparity` (tracing, compilation and run),
 then ``--repeat`` timed calls with the compiled stages; with ``--optimize`` also a first and a
 second call of `optimize_disparity` on the last result (thesis Ch. 7; the second one reuses
-the compiled step). Prints one table row per scene: the device, the first call's wall and
+the compiled step). With ``--deterministic`` XLA's deterministic GPU kernels are requested
+first (`mvedge_jax.request_deterministic_gpu`; run it with and without on the same GPU to
+measure their cost). Prints one table row per scene: the device, the first call's wall and
 compile seconds, the medians (and ranges) of the timed calls per stage (``edges``,
 ``surface``, ``reconstruct``) and in all, the centre view's MSE×100 and BadPix(0.07) against
 the ground truth when there is one, and the ``--optimize`` walls. Times are wall seconds
@@ -61,6 +64,7 @@ def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
     row: dict = {
         "scene": lf.name,
         "device": device_info()["device"],
+        "deterministic": device_info()["deterministic"],
         "first_call_s": first,
         "compile_s": result.compile_seconds,
     }
@@ -98,7 +102,7 @@ def _score(metrics: dict) -> str:
 def print_table(rows: list[dict]) -> None:
     """Print the rows as a Markdown table."""
     head = (
-        "| scene | device | first call (compile) s | edges | surface | reconstruct "
+        "| scene | device (deterministic) | first call (compile) s | edges | surface | reconstruct "
         "| total median (range) s | MSE×100 / BadPix(0.07) | --optimize 1st / 2nd s "
         "| optimized MSE×100 / BadPix(0.07) |"
     )
@@ -112,7 +116,8 @@ def print_table(rows: list[dict]) -> None:
             else "—"
         )
         print(
-            f"| {r['scene']} | {r['device']} | {r['first_call_s']:.1f} ({r['compile_s']:.1f}) "
+            f"| {r['scene']} | {r['device']} ({'yes' if r['deterministic'] else 'no'}) "
+            f"| {r['first_call_s']:.1f} ({r['compile_s']:.1f}) "
             f"| {st['edges']:.2f} | {st['surface']:.2f} | {st['reconstruct']:.2f} "
             f"| {r['total_median_s']:.2f} ({min(r['total_s']):.2f}–{max(r['total_s']):.2f}) "
             f"| {_score(r['metrics'])} | {opt} | {_score(r.get('optimize_metrics', {}))} |"
@@ -124,8 +129,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("scenes", nargs="*", default=None)
     parser.add_argument("--repeat", type=int, default=3, help="timed calls after the first")
     parser.add_argument("--optimize", action="store_true", help="also time optimize_disparity")
+    parser.add_argument(
+        "--deterministic",
+        action="store_true",
+        help="request XLA's deterministic GPU kernels (no effect on the CPU)",
+    )
     parser.add_argument("--json", type=Path, default=None, help="write the rows as JSON here")
     args = parser.parse_args(argv)
+    if args.deterministic:
+        from mvedge_jax import request_deterministic_gpu
+
+        request_deterministic_gpu()  # before the stage packages start the backend
     if args.repeat < 1:
         parser.error("--repeat must be at least 1")
     if args.json is not None and args.json.exists():
