@@ -61,10 +61,11 @@ def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
     result = estimate_disparity(lf, config)
     jax.block_until_ready(result.disparity)
     first = time.perf_counter() - t0
+    device = device_info()
     row: dict = {
         "scene": lf.name,
-        "device": device_info()["device"],
-        "deterministic": device_info()["deterministic"],
+        "device": device["device"],
+        "deterministic": device["deterministic"],
         "first_call_s": first,
         "compile_s": result.compile_seconds,
     }
@@ -85,7 +86,7 @@ def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
         walls = []
         for _ in range(2):
             t0 = time.perf_counter()
-            refined, info = optimize_disparity(lf, result, config)
+            refined, _ = optimize_disparity(lf, result, config)
             jax.block_until_ready(refined.disparity)
             walls.append(time.perf_counter() - t0)
         row["optimize_first_s"], row["optimize_second_s"] = walls

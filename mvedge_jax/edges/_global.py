@@ -118,7 +118,7 @@ def trilateral_filter(
     n_pts = vals.shape[0]
     last = jnp.full((2, H, W), -1, jnp.int32)
     last = last.at[ch, ys, xi].max(jnp.arange(n_pts, dtype=jnp.int32), mode="drop")
-    grid = jnp.where((last >= 0)[..., None], vals[jnp.maximum(last, 0)], 0.0).astype(dt)
+    grid = jnp.where((last >= 0)[..., None], vals[jnp.maximum(last, 0)], 0.0)
     p = jnp.moveaxis(grid, -1, 0)  # (5, 2, H, W)
     q = jnp.pad(p, ((0, 0), (0, 0), (r, r), (r, r)))
     a_s = 0.5 / config.refine.sigma_s**2
