@@ -79,6 +79,8 @@ class SharpenConfig(eqx.Module):
             others weigh 1).
         matte_jump: (threshold) disparity range of a window that marks a depth discontinuity for
             `boundary_matte` (pixels per view step).
+        matte_view_jump: (threshold) the same for the maps of the other views
+            (``matte_views``), which come from the projection of the sharpened centre map.
         matte_min_separation: (threshold) `boundary_matte` decides only where the foreground and
             background colours differ by at least this (in the units of ``matte_colour``:
             linear light in [0, 1] by default).
@@ -176,6 +178,7 @@ class SharpenConfig(eqx.Module):
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     refine_near_weight: Array = hyperparameter(2.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
+    matte_view_jump: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.15, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)

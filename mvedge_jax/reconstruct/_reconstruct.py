@@ -364,15 +364,15 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
     )
 
 
-def _matte(d: Array, guide: Array, config: ReconstructConfig) -> Array:
+def _matte(d: Array, guide: Array, config: ReconstructConfig, jump: Array | None = None) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
-    config's settings."""
+    config's settings (discontinuity threshold ``jump``, default ``sharpen.matte_jump``)."""
     sc = config.sharpen
     return boundary_matte(
         d,
         guide,
         radius=sc.matte_radius,
-        jump=sc.matte_jump,
+        jump=sc.matte_jump if jump is None else jump,
         spatial_sigma=sc.matte_sigma,
         impure_weight=sc.matte_impure_weight,
         min_separation=sc.matte_min_separation,
@@ -727,7 +727,8 @@ def _propagate(
         else:
             matte_guides = colour_guide(views[r_j, c_j], config.sharpen.matte_colour)
         matted = lax.map(
-            lambda pair: _matte(pair[0], pair[1], config), (disparity[r_j, c_j], matte_guides)
+            lambda pair: _matte(pair[0], pair[1], config, config.sharpen.matte_view_jump),
+            (disparity[r_j, c_j], matte_guides),
         )
         disparity = disparity.at[r_j, c_j].set(matted)
     return disparity, cross_h, cross_v, residual
@@ -768,7 +769,8 @@ def propagate(
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
        filled (``config.fill.hole_fill``).
     4. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre
-       (reprojected boundaries are only pixel-accurate).
+       (reprojected boundaries are only pixel-accurate), discontinuities marked by
+       ``sharpen.matte_view_jump``.
 
     The centre view's output is the mean of its two inpainted versions (row and column), so
     it is not ``centre_disparity`` itself. Fed the ``centre_sharp`` of a `reconstruct` call

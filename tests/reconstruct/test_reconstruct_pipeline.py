@@ -106,3 +106,25 @@ def test_partial_grid_views_are_filled(small_scene):
     mse = _per_view_mse(rec, lf)
     assert np.all(np.isfinite(mse))
     assert mse[0, 0] < 2.5, mse[0, 0]
+
+
+def test_view_matte_has_its_own_jump(small_scene):
+    # `matte_view_jump` marks the discontinuities of the other views' maps only: the
+    # sharpened centre map does not depend on it, and a jump above every disparity step
+    # leaves every view as it is without the per-view matte.
+    lf, edges, surface = small_scene
+    U, V = lf.grid
+    run = lambda **kw: reconstruct(
+        lf.views, edges, surface, ReconstructConfig(sharpen=SharpenConfig(**kw))
+    )
+    default = run()
+    same_as_centre = run(matte_view_jump=0.2)
+    never = run(matte_view_jump=1e9)
+    off = run(matte_views=False)
+    np.testing.assert_array_equal(same_as_centre.centre_sharp, default.centre_sharp)
+    np.testing.assert_array_equal(never.disparity, off.disparity)
+    others = np.ones((U, V), bool)
+    others[U // 2, V // 2] = False
+    changed = np.any(np.asarray(same_as_centre.disparity != default.disparity), axis=(2, 3))
+    assert changed[others].any() and not changed[U // 2, V // 2]
+    assert not np.array_equal(default.disparity, off.disparity)
