@@ -1,0 +1,128 @@
+"""Leave-one-scene-out of one parameter on every view of the synthetic scenes (whole chain).
+
+    python experiments/loo_views.py PATH V0,V1,... [--scenes default,thin,...] [--json OUT]
+
+``PATH`` is an array field of `PipelineConfig` by dotted path (`hyperparameter_paths`, e.g.
+``reconstruct.sharpen.matte_view_jump``); ``V0`` is the reference value (normally the current
+default), against which the others are compared. For every synthetic scene with ground truth in
+every view (the default scene and `mvedge_jax.synthetic.VARIANTS`) and every value, the whole
+chain (`estimate_disparity`) runs once (array leaves: one compilation per scene size) and is
+scored by the MSE×100 averaged over all views and by the worst view's MSE×100. For each held-out
+scene the value with the lowest geometric mean, over the other scenes, of the two ratios to
+``V0`` is picked and its held-out scores are printed beside ``V0``'s, then every value's
+all-views ratio per scene. The real scenes (GT in the centre view only) cannot score the other
+views; `experiments/reproduce_ch6.py --loo` covers the centre view.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from error_split import load_scene  # noqa: E402
+
+from mvedge_jax.pipeline import (  # noqa: E402
+    PipelineConfig,
+    estimate_disparity,
+    hyperparameter_paths,
+    replace_paths,
+)
+from mvedge_jax.synthetic import VARIANTS  # noqa: E402
+
+SCENES = ("default", *VARIANTS)
+
+
+def score_views(name: str, path: str, values: list[float]) -> dict[float, tuple[float, float]]:
+    """``{value: (all-views MSE×100, worst view MSE×100)}`` of one scene."""
+    lf = load_scene(name)
+    gt = np.asarray(lf.gt_disparity)
+    out = {}
+    for v in values:
+        config = replace_paths(PipelineConfig(), {path: jnp.asarray(v, jnp.float32)})
+        t = time.perf_counter()
+        d = np.asarray(estimate_disparity(lf, config).disparity)
+        per_view = 100 * np.mean((d - gt) ** 2, axis=(2, 3))
+        out[v] = (float(per_view.mean()), float(per_view.max()))
+        print(
+            f"  {name} {path}={v:g}: all views {out[v][0]:.3f}, worst view {out[v][1]:.3f} "
+            f"({time.perf_counter() - t:.0f} s)",
+            flush=True,
+        )
+    return out
+
+
+def _criterion(scores: dict, scenes, v: float, ref: float) -> float:
+    logs = [np.log(scores[s][v][k] / scores[s][ref][k]) for s in scenes for k in (0, 1)]
+    return float(np.exp(np.mean(logs)))
+
+
+def leave_one_out(scores: dict, values: list[float]) -> list[dict]:
+    """Per held-out scene: the value picked on the others and the held-out scores."""
+    ref, rows = values[0], []
+    for held in scores:
+        others = [s for s in scores if s != held]
+        pick = min(values, key=lambda v: _criterion(scores, others, v, ref))
+        rows.append(
+            {
+                "held_out": held,
+                "picked": pick,
+                "reference": scores[held][ref],
+                "held_out_score": scores[held][pick],
+            }
+        )
+    return rows
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument(
+        "path", help="PipelineConfig array field, e.g. reconstruct.sharpen.matte_view_jump"
+    )
+    ap.add_argument("values", help="comma-separated values; the first is the reference")
+    ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
+    ap.add_argument("--json", help="write the scores and the table as JSON")
+    args = ap.parse_args(argv)
+    if args.path not in hyperparameter_paths():
+        ap.error(
+            f"{args.path!r} is not an array field of PipelineConfig (see hyperparameter_paths)"
+        )
+    values = [float(v) for v in args.values.split(",")]
+    scenes = [s.strip() for s in args.scenes.split(",")]
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown or len(values) < 2 or len(scenes) < 2:
+        ap.error(f"need two or more values and two or more scenes of {SCENES}; got {args}")
+    scores = {s: score_views(s, args.path, values) for s in scenes}
+    rows = leave_one_out(scores, values)
+    ref = values[0]
+    print(
+        f"\n| held out | picked on the others | all views, {ref:g} → picked "
+        f"| worst view, {ref:g} → picked |"
+    )
+    print("|---|---|---|---|")
+    for r in rows:
+        (a0, w0), (a1, w1) = r["reference"], r["held_out_score"]
+        print(f"| {r['held_out']} | {r['picked']:g} | {a0:.3f} → {a1:.3f} | {w0:.3f} → {w1:.3f} |")
+    print(f"\nAll-views MSE×100 ratio to {ref:g} ({', '.join(scenes)}):")
+    for v in values[1:]:
+        ratios = ", ".join(f"{scores[s][v][0] / scores[s][ref][0]:.3f}" for s in scenes)
+        print(f"{v:g}: {ratios}")
+    if args.json:
+        payload = {
+            "path": args.path,
+            "values": values,
+            "scores": {s: {f"{v:g}": sc for v, sc in d.items()} for s, d in scores.items()},
+            "loo": rows,
+        }
+        Path(args.json).write_text(json.dumps(payload, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
