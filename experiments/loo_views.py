@@ -27,6 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from error_split import load_scene  # noqa: E402
+from reproduce_ch6 import _ratio  # noqa: E402
 
 from mvedge_jax.pipeline import (  # noqa: E402
     PipelineConfig,
@@ -58,17 +59,15 @@ def score_views(name: str, path: str, values: list[float]) -> dict[float, tuple[
     return out
 
 
-def _criterion(scores: dict, scenes, v: float, ref: float) -> float:
-    logs = [np.log(scores[s][v][k] / scores[s][ref][k]) for s in scenes for k in (0, 1)]
-    return float(np.exp(np.mean(logs)))
-
-
 def leave_one_out(scores: dict, values: list[float]) -> list[dict]:
     """Per held-out scene: the value picked on the others and the held-out scores."""
     ref, rows = values[0], []
+    # `_ratio`'s two-column criterion (the geometric mean of the ratios of columns 0 and 1 to
+    # the "default" entry), here on (all views, worst view) against the reference value.
+    table = {s: {"default": d[ref], **d} for s, d in scores.items()}
     for held in scores:
         others = [s for s in scores if s != held]
-        pick = min(values, key=lambda v: _criterion(scores, others, v, ref))
+        pick = min(values, key=lambda v: _ratio(table, others, v, "mse+badpix"))
         rows.append(
             {
                 "held_out": held,

@@ -364,15 +364,15 @@ def _refine(d, row, col, views, ch_views, ch_pos, config: ReconstructConfig, ite
     )
 
 
-def _matte(d: Array, guide: Array, config: ReconstructConfig, jump: Array | None = None) -> Array:
+def _matte(d: Array, guide: Array, config: ReconstructConfig, jump: Array) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
-    config's settings (discontinuity threshold ``jump``, default ``sharpen.matte_jump``)."""
+    config's settings and the discontinuity threshold ``jump``."""
     sc = config.sharpen
     return boundary_matte(
         d,
         guide,
         radius=sc.matte_radius,
-        jump=sc.matte_jump if jump is None else jump,
+        jump=jump,
         spatial_sigma=sc.matte_sigma,
         impure_weight=sc.matte_impure_weight,
         min_separation=sc.matte_min_separation,
@@ -429,7 +429,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
-        sharp = _matte(sharp, colour_guide(views[rc, cc], sc.matte_colour), config)
+        sharp = _matte(sharp, colour_guide(views[rc, cc], sc.matte_colour), config, sc.matte_jump)
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
         offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)
