@@ -2,12 +2,14 @@
 
     python experiments/loo_views.py PATH V0,V1,... [--scenes default,thin,...] [--json OUT]
 
-``PATH`` is an array field of `PipelineConfig` by dotted path (`hyperparameter_paths`, e.g.
-``reconstruct.sharpen.matte_view_jump``); ``V0`` is the reference value (normally the current
-default), against which the others are compared. For every synthetic scene with ground truth in
-every view (the default scene and `mvedge_jax.synthetic.VARIANTS`) and every value, the whole
-chain (`estimate_disparity`) runs once (array leaves: one compilation per scene size) and is
-scored by the MSE×100 averaged over all views and by the worst view's MSE×100. For each held-out
+``PATH`` is a field of `PipelineConfig` by dotted path: an array field (`hyperparameter_paths`,
+e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer field (e.g.
+``reconstruct.sharpen.matte_view_steps``, one compilation per value); ``V0`` is the reference
+value (normally the current default), against which the others are compared. For every
+synthetic scene with ground truth in every view (the default scene and
+`mvedge_jax.synthetic.VARIANTS`) and every value, the whole chain (`estimate_disparity`) runs
+once (array leaves: one compilation per scene size) and is scored by the MSE×100 averaged over
+all views and by the worst view's MSE×100. For each held-out
 scene the value with the lowest geometric mean, over the other scenes, of the two ratios to
 ``V0`` is picked and its held-out scores are printed beside ``V0``'s, then every value's
 all-views ratio per scene. The real scenes (GT in the centre view only) cannot score the other
@@ -17,6 +19,7 @@ views; `experiments/reproduce_ch6.py --loo` covers the centre view.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -32,6 +35,7 @@ from reproduce_ch6 import _ratio  # noqa: E402
 from mvedge_jax.pipeline import (  # noqa: E402
     PipelineConfig,
     estimate_disparity,
+    get_path,
     hyperparameter_paths,
     replace_paths,
 )
@@ -40,13 +44,24 @@ from mvedge_jax.synthetic import VARIANTS  # noqa: E402
 SCENES = ("default", *VARIANTS)
 
 
-def score_views(name: str, path: str, values: list[float]) -> dict[float, tuple[float, float]]:
+def with_value(config, path: str, value):
+    """``config`` with the field at ``path`` set: `replace_paths` for an array field, nested
+    `dataclasses.replace` for a static one."""
+    if path in hyperparameter_paths():
+        return replace_paths(config, {path: jnp.asarray(value, jnp.float32)})
+    head, _, rest = path.partition(".")
+    if not rest:
+        return dataclasses.replace(config, **{head: value})
+    return dataclasses.replace(config, **{head: with_value(getattr(config, head), rest, value)})
+
+
+def score_views(name: str, path: str, values: list) -> dict:
     """``{value: (all-views MSE×100, worst view MSE×100)}`` of one scene."""
     lf = load_scene(name)
     gt = np.asarray(lf.gt_disparity)
     out = {}
     for v in values:
-        config = replace_paths(PipelineConfig(), {path: jnp.asarray(v, jnp.float32)})
+        config = with_value(PipelineConfig(), path, v)
         t = time.perf_counter()
         d = np.asarray(estimate_disparity(lf, config).disparity)
         per_view = 100 * np.mean((d - gt) ** 2, axis=(2, 3))
@@ -82,17 +97,27 @@ def leave_one_out(scores: dict, values: list[float]) -> list[dict]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument(
-        "path", help="PipelineConfig array field, e.g. reconstruct.sharpen.matte_view_jump"
+        "path",
+        help="PipelineConfig array field (e.g. reconstruct.sharpen.matte_view_jump) or static "
+        "integer field (e.g. reconstruct.sharpen.matte_view_steps)",
     )
     ap.add_argument("values", help="comma-separated values; the first is the reference")
     ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
     ap.add_argument("--json", help="write the scores and the table as JSON")
     args = ap.parse_args(argv)
-    if args.path not in hyperparameter_paths():
-        ap.error(
-            f"{args.path!r} is not an array field of PipelineConfig (see hyperparameter_paths)"
-        )
-    values = [float(v) for v in args.values.split(",")]
+    if args.path in hyperparameter_paths():
+        values = [float(v) for v in args.values.split(",")]
+    else:
+        try:
+            current = get_path(PipelineConfig(), args.path)
+        except AttributeError:
+            current = None
+        if not isinstance(current, int) or isinstance(current, bool):
+            ap.error(
+                f"{args.path!r} is neither an array field of PipelineConfig (see "
+                "hyperparameter_paths) nor a static integer field"
+            )
+        values = [int(v) for v in args.values.split(",")]
     scenes = [s.strip() for s in args.scenes.split(",")]
     unknown = [s for s in scenes if s not in SCENES]
     if unknown or len(values) < 2 or len(scenes) < 2:
