@@ -81,6 +81,10 @@ class SharpenConfig(eqx.Module):
             `boundary_matte` (pixels per view step).
         matte_view_jump: (threshold) the same for the maps of the other views
             (``matte_views``), which come from the projection of the sharpened centre map.
+        matte_view_tolerance: (threshold) `observed_background`'s ``tolerance``: a sample
+            of another view counts as the background where that view's map spans less than
+            this over the 3×3 window there and lies within this of the background disparity
+            (pixels per view step).
         matte_min_separation: (threshold) `boundary_matte` decides only where the foreground and
             background colours differ by at least this (in the units of ``matte_colour``:
             linear light in [0, 1] by default).
@@ -156,6 +160,10 @@ class SharpenConfig(eqx.Module):
             (`boundary_matte`; not in the thesis).
         matte_views: apply `boundary_matte` to every other view's final map too (reprojected
             boundaries are only pixel-accurate); ~20 ms per 512² view.
+        matte_view_steps: the views' matte takes its background colour from the views up
+            to this many steps away along the grid's axes that see the background surface
+            at the pixel unoccluded (`observed_background`), where one does; elsewhere, and
+            at 0, from the window mean (not in the thesis).
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
         matte_colour: the colours of its two-colour mixture model: ``"linear"`` (sRGB
@@ -179,6 +187,7 @@ class SharpenConfig(eqx.Module):
     refine_near_weight: Array = hyperparameter(2.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     matte_view_jump: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
+    matte_view_tolerance: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.15, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
@@ -207,6 +216,7 @@ class SharpenConfig(eqx.Module):
     shading_edge_radius: int = static(4, lower=0, upper=64)
     matte: bool = static(True)
     matte_views: bool = static(True)
+    matte_view_steps: int = static(4, lower=0, upper=64)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
     matte_colour: str = static("linear", choices=MATTE_COLOURS)

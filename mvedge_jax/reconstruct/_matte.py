@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
+from jax import lax
+from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from ._photo import _window_extrema
 
@@ -19,6 +21,8 @@ def boundary_matte(
     impure_weight: float | Array = 0.05,
     min_separation: float | Array = 0.1,
     max_residual: float | Array = float("inf"),
+    background: Float[ArrayLike, "H W C"] | None = None,
+    background_valid: Bool[ArrayLike, "H W"] | None = None,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -43,7 +47,10 @@ def boundary_matte(
     whose window lacks one of the two sides, pixels whose colour lies off the line through
     ``B`` and ``F`` by more than ``max_residual`` (squared distance ``|c − B − α (F − B)|²``
     relative to ``|F − B|²``: a third colour the two-colour model does not explain, as
-    between fine repeated structures), and near-ties ``|α − 1/2| ≤ 10⁻³``. One pass;
+    between fine repeated structures), and near-ties ``|α − 1/2| ≤ 10⁻³``. With
+    ``background`` (e.g. `observed_background`): where ``background_valid``, ``B`` is that
+    colour, the background surface at the pixel itself as another view sees it unoccluded,
+    instead of the window mean, which texture next to the edge biases. One pass;
     jit/vmap-able. Not differentiable in the side chosen (a selection); the output is
     piecewise a weighted mean of the input.
 
@@ -66,13 +73,17 @@ def boundary_matte(
         min_separation: minimum colour distance ``|F − B|`` (guide units) to decide.
         max_residual: largest squared distance of the pixel's colour from the ``B``–``F``
             line, relative to ``|F − B|²`` (dimensionless), to decide; ``inf`` = no test.
+        background: ``(H, W, C)`` background colour behind every pixel (guide units), or
+            ``None`` (the window mean everywhere).
+        background_valid: ``(H, W)`` bool, where ``background`` holds (with ``background``).
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
 
     Raises:
         ValueError: on a non-2-D disparity, a guide of another ``(H, W)``, ``radius < 1`` or
-            ``spatial_sigma <= 0``.
+            ``spatial_sigma <= 0``, or ``background`` / ``background_valid`` of another shape
+            or given without the other.
     """
     d = jnp.asarray(disparity)
     g = jnp.asarray(guide, d.dtype)
@@ -86,6 +97,16 @@ def boundary_matte(
     if not spatial_sigma > 0:
         raise ValueError(f"spatial_sigma must be > 0; got {spatial_sigma}")
     H, W = d.shape
+    if (background is None) != (background_valid is None):
+        raise ValueError("background and background_valid must be given together")
+    if background is not None:
+        background = jnp.asarray(background, d.dtype)
+        background_valid = jnp.asarray(background_valid, bool)
+        if background.shape != g.shape or background_valid.shape != d.shape:
+            raise ValueError(
+                f"background must have shape {g.shape} and background_valid {d.shape}; got "
+                f"{tuple(background.shape)} and {tuple(background_valid.shape)}"
+            )
     lo, hi = _window_extrema(d, radius)
     band = (hi - lo) > jump
     lo1, hi1 = _window_extrema(d, 1)
@@ -120,6 +141,8 @@ def boundary_matte(
     tiny = jnp.asarray(1e-12, d.dtype)
     F = cf / jnp.maximum(wf, tiny)[..., None]
     B = cb / jnp.maximum(wb, tiny)[..., None]
+    if background is not None:
+        B = jnp.where(background_valid[..., None], background, B)
     sep = F - B
     sep2 = jnp.sum(sep * sep, axis=-1)
     alpha = jnp.sum((g - B) * sep, axis=-1) / jnp.maximum(sep2, tiny)
@@ -137,3 +160,175 @@ def boundary_matte(
     decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
     new = jnp.where(alpha > 0.5, jnp.where(is_fg, d, d_f), jnp.where(is_fg, d_b, d))
     return jnp.where(decide, new, d)
+
+
+# Directions (row, column) along which `observed_background` looks for the background.
+_AXES = ((0, 1), (0, -1), (1, 0), (-1, 0))
+
+
+def observed_background(
+    row: Int[ArrayLike, ""],
+    col: Int[ArrayLike, ""],
+    background_disparity: Float[ArrayLike, "H W"],
+    guides: Float[ArrayLike, "U V H W C"],
+    maps: Float[ArrayLike, "U V H W"],
+    present: Bool[ArrayLike, "U V"],
+    *,
+    steps: int = 3,
+    tolerance: float | Array = 0.3,
+    where: Bool[ArrayLike, "H W"] | None = None,
+    capacity: int | None = None,
+) -> tuple[Float[Array, "H W C"], Bool[Array, "H W"]]:
+    """The colour of the background surface at every pixel of one view, seen by other views.
+
+    Where a depth edge crosses pixel ``x`` of view ``(row, col)``, the pixel mixes the
+    foreground and the background colour. The background surface point at ``x``, of
+    disparity ``b = background_disparity[x]``, lies at ``x − b·Δ`` in the view ``Δ`` view
+    steps away (``Δ = (dr, dc)``, rows and columns; the SPEC's sign), and views on the far side
+    of the edge see it unoccluded, away from the foreground edge, which moves with the
+    foreground's larger disparity. Candidates: the views ``1 … steps`` steps away along the
+    four axis directions (those inside the grid and ``present``). A candidate sample, at the
+    nearest pixel of ``x − b·Δ`` inside the frame, counts where the candidate view's map
+    (``maps``) spans less than ``tolerance`` over the 3×3 window there and lies within
+    ``tolerance`` of ``b``: the sample is the background surface, away from its boundary.
+    The result is the mean colour of the samples that count.
+
+    With ``where``, only the pixels of ``where`` are computed, the first ``capacity`` of them
+    in row-major order (a fixed-size subset, e.g. the depth edges, whose size must be
+    static); the others are not valid.
+
+    Not in the thesis; it is the background colour of `boundary_matte` for the views'
+    maps (`SharpenConfig.matte_view_steps`); measurements in docs/ACCURACY.md.
+
+    Args:
+        row, col: the view (int scalars; may be traced).
+        background_disparity: ``(H, W)`` background disparity of every pixel of the view
+            (pixels per view step), e.g. the window minimum of its map.
+        guides: ``(U, V, H, W, C)`` colour guides of every view (those of the matte).
+        maps: ``(U, V, H, W)`` disparity map of every view (pixels per view step).
+        present: ``(U, V)`` bool, views that hold an image (partial grids).
+        steps: largest distance of a candidate view, view steps (static int >= 1).
+        tolerance: largest range of the candidate's map over the 3×3 window, and largest
+            difference from ``b``, pixels per view step.
+        where: ``(H, W)`` bool, the pixels to compute (default: all).
+        capacity: how many pixels of ``where`` at most (static int >= 1; default: all
+            ``H·W``).
+
+    Returns:
+        ``(colour (H, W, C), valid (H, W) bool)``: the mean observed background colour and
+        where at least one sample counts (colour 0 elsewhere). Not differentiable (a
+        selection of samples).
+
+    Raises:
+        ValueError: on shapes that do not match, ``steps < 1`` or ``capacity < 1``.
+    """
+    g = jnp.asarray(guides)
+    b = jnp.asarray(background_disparity)
+    maps = jnp.asarray(maps)
+    present = jnp.asarray(present, bool)
+    if g.ndim != 5:
+        raise ValueError(f"guides must have shape (U, V, H, W, C); got {tuple(g.shape)}")
+    U, V, H, W, C = g.shape
+    if b.shape != (H, W) or maps.shape != (U, V, H, W):
+        raise ValueError(
+            f"background_disparity must have shape {(H, W)} and maps {(U, V, H, W)}; "
+            f"got {tuple(b.shape)} and {tuple(maps.shape)}"
+        )
+    if present.shape != (U, V):
+        raise ValueError(f"present must have shape {(U, V)}; got {tuple(present.shape)}")
+    steps = int(steps)
+    if steps < 1:
+        raise ValueError(f"steps must be >= 1; got {steps}")
+    n = H * W
+    capacity = n if capacity is None else int(capacity)
+    if capacity < 1:
+        raise ValueError(f"capacity must be >= 1; got {capacity}")
+    if where is None:
+        where = jnp.ones((H, W), bool)
+    else:
+        where = jnp.asarray(where, bool)
+        if where.shape != (H, W):
+            raise ValueError(f"where must have shape {(H, W)}; got {tuple(where.shape)}")
+    lo, hi = jax.vmap(jax.vmap(lambda m: _window_extrema(m, 1)))(maps)
+    surface = smooth_surface(maps, lo, hi, tolerance)
+    flat = pixel_subset(where.ravel(), min(capacity, n))
+    bs = lax.stop_gradient(b.ravel()[jnp.minimum(flat, n - 1)])
+    colour, valid = background_samples(
+        row, col, flat, bs, g, surface, present, steps=steps, tolerance=tolerance
+    )
+    colour = jnp.zeros((n, C), g.dtype).at[flat].set(colour, mode="drop")
+    valid = jnp.zeros((n,), bool).at[flat].set(valid, mode="drop")
+    return colour.reshape(H, W, C), valid.reshape(H, W)
+
+
+def smooth_surface(maps: Array, low: Array, high: Array, tolerance) -> Array:
+    """``maps`` where the 3×3 window (extrema ``low``, ``high``) spans less than
+    ``tolerance``, NaN elsewhere (no sample of `background_samples` counts there)."""
+    return jnp.where(high - low < tolerance, maps, jnp.nan)
+
+
+def pixel_subset(where: Bool[Array, " N"], capacity: int) -> Int[Array, " K"]:
+    """The flat indices of the first ``capacity`` pixels of ``where`` (a flattened frame),
+    in order, padded with ``N`` (an index outside the frame) to ``capacity``.
+
+    Equal to ``jnp.nonzero(where, size=capacity, fill_value=N)``; the running count is formed
+    by two levels of 64-wide triangular matrix products (exact in float32 below 2²⁴ pixels),
+    ~1.5x faster than the cumulative sum of `jnp.nonzero` on XLA's CPU backend.
+    """
+    n = where.size
+    block = 64
+    if n >= 2**24:
+        return jnp.nonzero(where, size=capacity, fill_value=n)[0].astype(jnp.int32)
+    m = -(-n // block**2) * block**2
+    x = jnp.pad(where.astype(jnp.float32), (0, m - n)).reshape(m // block, block)
+    tri = jnp.triu(jnp.ones((block, block), jnp.float32))
+    within = x @ tri  # inclusive running count within each block of 64 pixels
+    totals = within[:, -1].reshape(-1, block)
+    groups = totals @ tri  # ... of the block totals within each group of 64 blocks
+    before_group = jnp.cumsum(groups[:, -1]) - groups[:, -1]
+    before_block = (groups - totals + before_group[:, None]).ravel()
+    rank = (within + before_block[:, None]).ravel()[:n].astype(jnp.int32) - 1
+    slot = jnp.where(where & (rank < capacity), rank, capacity)
+    out = jnp.full((capacity,), n, jnp.int32)
+    return out.at[slot].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
+
+
+def background_samples(
+    row: Int[ArrayLike, ""],
+    col: Int[ArrayLike, ""],
+    flat: Int[Array, " K"],
+    background_disparity: Float[Array, " K"],
+    guides: Float[Array, "U V H W C"],
+    surface: Float[Array, "U V H W"],
+    present: Bool[Array, "U V"],
+    *,
+    steps: int,
+    tolerance: float | Array,
+) -> tuple[Float[Array, "K C"], Bool[Array, " K"]]:
+    """`observed_background` at the pixels ``flat`` (row-major indices; ``H·W`` or above =
+    padding, never valid) of background disparity ``background_disparity``, with the
+    `smooth_surface` of every view's map: the mean colour of the samples that count and
+    whether any does (shapes checked by the caller)."""
+    U, V, H, W, C = guides.shape
+    n = H * W
+    used = flat < n
+    pix = jnp.minimum(flat, n - 1)
+    ys, xs = pix // W, pix % W
+    bs = background_disparity
+    total = jnp.zeros((pix.shape[0], C), guides.dtype)
+    count = jnp.zeros(pix.shape, jnp.int32)
+    for dr, dc in _AXES:
+        for k in range(1, steps + 1):
+            r2, c2 = row + dr * k, col + dc * k
+            view_ok = (r2 >= 0) & (r2 < U) & (c2 >= 0) & (c2 < V)
+            r2, c2 = jnp.clip(r2, 0, U - 1), jnp.clip(c2, 0, V - 1)
+            view_ok = view_ok & present[r2, c2]
+            py = jnp.round(ys - (dr * k) * bs).astype(jnp.int32)
+            px = jnp.round(xs - (dc * k) * bs).astype(jnp.int32)
+            inside = (py >= 0) & (py < H) & (px >= 0) & (px < W)
+            py, px = jnp.clip(py, 0, H - 1), jnp.clip(px, 0, W - 1)
+            # NaN (a window across a discontinuity) fails the comparison.
+            ok = view_ok & used & inside & (jnp.abs(surface[r2, c2, py, px] - bs) < tolerance)
+            total = total + jnp.where(ok[:, None], guides[r2, c2, py, px], 0.0)
+            count = count + ok.astype(jnp.int32)
+    return total / jnp.maximum(count, 1)[:, None].astype(guides.dtype), count > 0

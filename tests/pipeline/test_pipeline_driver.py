@@ -65,12 +65,12 @@ def test_demo_accuracy_on_every_view(demo_run):
     U, V = lf.grid
     per_view = [depth_metrics(d[r, c], gt[r, c], gtm[r, c]) for r in range(U) for c in range(V)]
     worst = max(m["mse_x100"] for m in per_view)
-    # Measured 0.756 (mean of views 0.555, mean BadPix(0.07) 1.61) on the scene with colours
-    # mixed in linear light. The target, every view <= 0.5, is not met
-    # (docs/ACCURACY.md).
-    assert worst <= 0.8, worst
-    assert np.mean([m["mse_x100"] for m in per_view]) < 0.6
-    assert np.mean([m["badpix_0.07"] for m in per_view]) < 2.0
+    # Measured 0.498 (mean of views 0.318, mean BadPix(0.07) 1.59) on the scene with colours
+    # mixed in linear light; the target is every view <= 0.5 (docs/ACCURACY.md; the
+    # bound leaves room for floating-point differences between CPUs).
+    assert worst <= 0.51, worst
+    assert np.mean([m["mse_x100"] for m in per_view]) < 0.35
+    assert np.mean([m["badpix_0.07"] for m in per_view]) < 1.8
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["view_consistency"] < 0.02
 

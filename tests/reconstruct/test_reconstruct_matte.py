@@ -6,11 +6,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.ndimage import grey_dilation, grey_erosion
+from scipy.ndimage import grey_dilation, grey_erosion, minimum_filter
 
 from mvedge_jax.lightfield import linear_to_srgb, srgb_to_linear
-from mvedge_jax.reconstruct import SharpenConfig, boundary_matte
+from mvedge_jax.reconstruct import SharpenConfig, boundary_matte, observed_background
 from mvedge_jax.reconstruct._centre import colour_guide
+from mvedge_jax.reconstruct._matte import pixel_subset
 from mvedge_jax.synthetic import make_scene
 
 FG, BG = 1.5, -0.5
@@ -196,3 +197,138 @@ def test_matte_leaves_a_pixel_alone_whose_window_has_one_side(dtype, mode, x64):
 
         (_, out), _ = jax.jit(jax.value_and_grad(loss, has_aux=True))(d)
     assert float(out[4, 4]) == float(d[4, 4])
+
+
+def _textured_edge(observed):
+    """A vertical depth edge (foreground left, grey 0.5) whose mixed column 8 is 20 %
+    foreground over a dark (0.05) background stripe, next to bright (0.9) background
+    columns: the map is fattened (column 8 foreground). Returns ``(d, guide, out)`` with
+    ``out`` the matte given the true background colour at column 8 (``observed``) or not."""
+    H, W = 12, 16
+    d = np.full((H, W), BG, np.float32)
+    d[:, :9] = FG
+    grey = np.full((W,), 0.9, np.float32)
+    grey[:8] = 0.5
+    grey[8] = 0.2 * 0.5 + 0.8 * 0.05
+    img = np.repeat(np.broadcast_to(grey, (H, W))[..., None], 3, axis=-1).copy()
+    kw = {}
+    if observed:
+        back = np.zeros_like(img)
+        back[:, 8] = 0.05
+        valid = np.zeros((H, W), bool)
+        valid[:, 8] = True
+        kw = {"background": jnp.asarray(back), "background_valid": jnp.asarray(valid)}
+    out = np.asarray(jax.jit(boundary_matte)(jnp.asarray(d), jnp.asarray(img), **kw))
+    return d, img, out
+
+
+def test_matte_decides_with_the_observed_background():
+    # The window's background (the bright columns) makes the mostly-background pixel look
+    # like foreground; its own background colour, seen by another view, does not.
+    d, img, plain = _textured_edge(observed=False)
+    np.testing.assert_array_equal(plain, d)
+    _, _, out = _textured_edge(observed=True)
+    np.testing.assert_allclose(out[:, 8], BG, atol=1e-6)
+    np.testing.assert_array_equal(np.delete(out, 8, axis=1), np.delete(d, 8, axis=1))
+    # Nowhere valid: the window mean, as without it.
+    none = boundary_matte(d, img, background=np.ones_like(img), background_valid=np.zeros(d.shape))
+    np.testing.assert_array_equal(np.asarray(none), plain)
+    with pytest.raises(ValueError, match="together"):
+        boundary_matte(d, img, background=img)
+    with pytest.raises(ValueError, match="background must have shape"):
+        boundary_matte(d, img, background=img[:4], background_valid=np.ones(d.shape, bool))
+
+
+def _square_light_field(U=5, V=5, size=32, fg=2.0):
+    """A textured far plane (disparity 0) and a textured square (disparity ``fg``, rows and
+    columns 12–19 in the centre view), integer shifts, no mixed pixels: ``(guides (U, V, H,
+    W, 3), maps (U, V, H, W), background texture (H, W, 3))``."""
+    rng = np.random.default_rng(3)
+    back = rng.uniform(0.0, 1.0, (size, size, 3)).astype(np.float32)
+    front = rng.uniform(0.0, 1.0, (8, 8, 3)).astype(np.float32)
+    guides = np.broadcast_to(back, (U, V, size, size, 3)).copy()
+    maps = np.zeros((U, V, size, size), np.float32)
+    for r in range(U):
+        for c in range(V):
+            # A point at x in the centre view is at x - offset * disparity in this view.
+            y0, x0 = 12 - int((r - U // 2) * fg), 12 - int((c - V // 2) * fg)
+            guides[r, c, y0 : y0 + 8, x0 : x0 + 8] = front
+            maps[r, c, y0 : y0 + 8, x0 : x0 + 8] = fg
+    return guides, maps, back
+
+
+def _observed(guides, maps, view, present, steps=3, **kw):
+    b = minimum_filter(maps[view], size=5, mode="nearest")
+    colour, valid = jax.jit(observed_background, static_argnames=("steps", "capacity"))(
+        *view, b, guides, maps, present, steps=steps, tolerance=0.3, **kw
+    )
+    return np.asarray(colour), np.asarray(valid), b
+
+
+def test_observed_background_is_the_background_behind_the_foreground_edge():
+    guides, maps, back = _square_light_field()
+    U, V = maps.shape[:2]
+    colour, valid, b = _observed(guides, maps, (2, 2), np.ones((U, V), bool))
+    far = b == 0
+    # Every sample that counts is the far plane's texture at the pixel itself.
+    np.testing.assert_allclose(colour[valid & far], back[valid & far], atol=1e-6)
+    # Every square pixel within 2 px of its outline (window minimum 0) has a sample.
+    outline = (maps[2, 2] > 0) & far
+    assert outline.sum() == 48 and valid[outline].all()
+    # Views without an image never count, nor views outside the grid.
+    _, none, _ = _observed(guides, maps, (2, 2), _only(U, V))
+    assert not none.any()
+    g1, m1 = guides[2:3, 2:4], maps[2:3, 2:4]
+    _, edge_of_grid, _ = _observed(g1, m1, (0, 0), np.array([[True, False]]))
+    assert not edge_of_grid.any()
+
+
+def test_observed_background_of_a_subset_of_pixels():
+    guides, maps, _ = _square_light_field()
+    present = np.ones(maps.shape[:2], bool)
+    colour, valid, _ = _observed(guides, maps, (1, 3), present)
+    where = np.zeros(maps.shape[2:], bool)
+    where[8:24, 6:26] = True
+    sub, sub_valid, _ = _observed(guides, maps, (1, 3), present, where=where, capacity=1000)
+    np.testing.assert_array_equal(sub_valid, valid & where)
+    np.testing.assert_array_equal(sub[where], colour[where])
+    # With room for 3 rows of the subset, the rows below it are not computed.
+    part, part_valid, _ = _observed(guides, maps, (1, 3), present, where=where, capacity=60)
+    np.testing.assert_array_equal(part_valid[:11], sub_valid[:11])
+    assert sub_valid[11:].any() and not part_valid[11:].any()
+    np.testing.assert_array_equal(part[:11], sub[:11])
+
+
+def _only(U, V):
+    present = np.zeros((U, V), bool)
+    present[U // 2, V // 2] = True
+    return present
+
+
+def test_observed_background_rejects_bad_input():
+    guides, maps, _ = _square_light_field(U=3, V=3)
+    b = np.zeros(maps.shape[2:], np.float32)
+    with pytest.raises(ValueError, match="steps"):
+        observed_background(1, 1, b, guides, maps, np.ones((3, 3), bool), steps=0)
+    with pytest.raises(ValueError, match="background_disparity must have shape"):
+        observed_background(1, 1, b[:4], guides, maps, np.ones((3, 3), bool))
+    with pytest.raises(ValueError, match="present must have shape"):
+        observed_background(1, 1, b, guides, maps, np.ones((2, 3), bool))
+    with pytest.raises(ValueError, match="guides must have shape"):
+        observed_background(1, 1, b, guides[0], maps, np.ones((3, 3), bool))
+    with pytest.raises(ValueError, match="capacity"):
+        observed_background(1, 1, b, guides, maps, np.ones((3, 3), bool), capacity=0)
+    with pytest.raises(ValueError, match="where must have shape"):
+        observed_background(1, 1, b, guides, maps, np.ones((3, 3), bool), where=b[:3] > 0)
+
+
+@pytest.mark.parametrize(
+    "n, capacity, fraction",
+    [(100, 10, 0.3), (5000, 6000, 0.5), (160 * 160, 4096, 0.9), (128 * 128, 4096, 0.1)],
+)
+def test_pixel_subset_is_the_first_pixels_of_the_mask(n, capacity, fraction):
+    where = jnp.asarray(np.random.default_rng(n).random(n) < fraction)
+    expected = jnp.nonzero(where, size=capacity, fill_value=n)[0]
+    np.testing.assert_array_equal(
+        np.asarray(jax.jit(pixel_subset, static_argnums=1)(where, capacity)), expected
+    )
