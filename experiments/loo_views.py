@@ -19,13 +19,11 @@ views; `experiments/reproduce_ch6.py --loo` covers the centre view.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 import time
 from pathlib import Path
 
-import jax.numpy as jnp
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -37,22 +35,11 @@ from mvedge_jax.pipeline import (  # noqa: E402
     estimate_disparity,
     get_path,
     hyperparameter_paths,
-    replace_paths,
+    with_values,
 )
 from mvedge_jax.synthetic import VARIANTS  # noqa: E402
 
 SCENES = ("default", *VARIANTS)
-
-
-def with_value(config, path: str, value):
-    """``config`` with the field at ``path`` set: `replace_paths` for an array field, nested
-    `dataclasses.replace` for a static one."""
-    if path in hyperparameter_paths():
-        return replace_paths(config, {path: jnp.asarray(value, jnp.float32)})
-    head, _, rest = path.partition(".")
-    if not rest:
-        return dataclasses.replace(config, **{head: value})
-    return dataclasses.replace(config, **{head: with_value(getattr(config, head), rest, value)})
 
 
 def score_views(name: str, path: str, values: list) -> dict:
@@ -61,7 +48,7 @@ def score_views(name: str, path: str, values: list) -> dict:
     gt = np.asarray(lf.gt_disparity)
     out = {}
     for v in values:
-        config = with_value(PipelineConfig(), path, v)
+        config = with_values(PipelineConfig(), {path: v})
         t = time.perf_counter()
         d = np.asarray(estimate_disparity(lf, config).disparity)
         per_view = 100 * np.mean((d - gt) ** 2, axis=(2, 3))

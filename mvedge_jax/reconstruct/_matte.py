@@ -174,8 +174,8 @@ def observed_background(
     maps: Float[ArrayLike, "U V H W"],
     present: Bool[ArrayLike, "U V"],
     *,
-    steps: int = 3,
-    tolerance: float | Array = 0.3,
+    steps: int = 4,
+    tolerance: float | Array = 0.5,
     where: Bool[ArrayLike, "H W"] | None = None,
     capacity: int | None = None,
 ) -> tuple[Float[Array, "H W C"], Bool[Array, "H W"]]:
@@ -256,9 +256,22 @@ def observed_background(
     colour, valid = background_samples(
         row, col, flat, bs, g, surface, present, steps=steps, tolerance=tolerance
     )
-    colour = jnp.zeros((n, C), g.dtype).at[flat].set(colour, mode="drop")
-    valid = jnp.zeros((n,), bool).at[flat].set(valid, mode="drop")
-    return colour.reshape(H, W, C), valid.reshape(H, W)
+    return samples_to_frame(flat, colour, valid, (H, W))
+
+
+def samples_to_frame(
+    flat: Int[Array, " K"], colour: Float[Array, "K C"], valid: Bool[Array, " K"], shape
+) -> tuple[Float[Array, "H W C"], Bool[Array, "H W"]]:
+    """The samples of `background_samples` at the flat indices ``flat`` (padding dropped)
+    placed in an ``(H, W)`` frame: ``(colour (H, W, C), 0 where not valid; valid (H, W))``
+    (one scatter: the invalid entries travel as NaN)."""
+    H, W = shape
+    C = colour.shape[-1]
+    coded = jnp.where(valid[:, None], colour, jnp.nan)
+    frame = jnp.full((H * W, C), jnp.nan, colour.dtype).at[flat].set(coded, mode="drop")
+    frame = frame.reshape(H, W, C)
+    ok = jnp.isfinite(frame[..., 0])
+    return jnp.where(ok[..., None], frame, 0.0), ok
 
 
 def smooth_surface(maps: Array, low: Array, high: Array, tolerance) -> Array:

@@ -30,7 +30,13 @@ from ._crosshair import (
     rasterise_lines,
     solve_epis,
 )
-from ._matte import background_samples, boundary_matte, pixel_subset, smooth_surface
+from ._matte import (
+    background_samples,
+    boundary_matte,
+    pixel_subset,
+    samples_to_frame,
+    smooth_surface,
+)
 from ._photo import (
     _window_extrema,
     photo_refine,
@@ -399,19 +405,18 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     sc = config.sharpen
     others = np.nonzero((np.arange(U)[:, None] != rc) | (np.arange(V)[None, :] != cc))
     r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
-    if sc.matte_colour == config.colour_space:
-        matte_guides = guides
-    else:
-        matte_guides = colour_guide(views, sc.matte_colour)
+    same = sc.matte_colour == config.colour_space
     jump = sc.matte_view_jump
     if sc.matte_view_steps == 0:
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
+        own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         matted = lax.map(
-            lambda pair: _matte(pair[0], pair[1], config, jump),
-            (disparity[r_j, c_j], matte_guides[r_j, c_j]),
+            lambda pair: _matte(pair[0], pair[1], config, jump), (disparity[r_j, c_j], own)
         )
         return disparity.at[r_j, c_j].set(matted)
+    # The samples come from every view, the centre included.
+    matte_guides = guides if same else colour_guide(views, sc.matte_colour)
     H, W = disparity.shape[2:]
     n = H * W
     # Each view's pixels on a 3×3 discontinuity (whose window minimum is their background
@@ -441,16 +446,11 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         )
     )(r_j, c_j, flat, back_d)
 
-    # NaN marks the pixels without a sample (one scatter per view instead of two).
-    colour = jnp.where(valid[..., None], colour, jnp.nan)
-
     def one(args):
-        d, guide, f, col = args
-        C = guide.shape[-1]
-        back = jnp.full((n, C), jnp.nan, col.dtype).at[f].set(col, mode="drop").reshape(H, W, C)
-        return _matte(d, guide, config, jump, (back, jnp.isfinite(back[..., 0])))
+        d, guide, f, col, ok = args
+        return _matte(d, guide, config, jump, samples_to_frame(f, col, ok, (H, W)))
 
-    matted = lax.map(one, (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour))
+    matted = lax.map(one, (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid))
     return disparity.at[r_j, c_j].set(matted)
 
 
