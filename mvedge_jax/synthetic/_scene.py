@@ -301,7 +301,11 @@ def render_surfaces(
             covered (include a ``WHOLE`` background).
         grid: ``(U, V)`` angular resolution (each >= 3).
         size: ``(H, W)`` view size in pixels.
-        supersample: colour samples per pixel along each axis (anti-aliasing), >= 1.
+        supersample: colour samples per pixel along each axis (anti-aliasing), >= 1. An
+            odd value makes the pixel centre, where the ground truth is taken, one of the
+            samples; with an even value the pixels a straight occlusion boundary halves mix
+            the two surfaces equally and their ground truth is not in the images
+            (`render_coverage`).
         name: scene name stored in the `LightField`.
         disparity_range: stored in the `LightField`; defaults to the range of the GT.
 
@@ -339,6 +343,58 @@ def render_surfaces(
         source=None,
         disparity_range=(float(disparity_range[0]), float(disparity_range[1])),
     )
+
+
+@functools.partial(jax.jit, static_argnames=("H", "W", "ss"))
+def _coverage(p, offsets, *, H: int, W: int, ss: int):
+    """Share of the ``ss²`` colour samples of each pixel that see the surface visible at the
+    pixel centre, ``(N, H, W)``, for the views at ``offsets (N, 2)``."""
+    _, w, _, _ = _render_geometry(p, offsets, H=H, W=W, ss=ss)
+    centre = _render_ids(p, offsets, H=H, W=W)
+    return (w == centre[:, None]).mean(axis=1)
+
+
+def render_coverage(
+    surfaces: list[Surface],
+    *,
+    grid: tuple[int, int] = (9, 9),
+    size: tuple[int, int] = (128, 128),
+    supersample: int = 2,
+) -> jax.Array:
+    """Per-view coverage of the ground-truth surface: the share of each pixel's colour
+    samples that see the surface visible at the pixel centre.
+
+    `render_surfaces` takes the ground-truth disparity at the pixel centre and the colour as
+    the mean over ``supersample²`` samples; this is how much of that colour comes from the
+    ground-truth surface. 1 inside a surface; below 1 on pixels an occlusion boundary crosses
+    (mixed pixels). With an even ``supersample`` a straight boundary through the middle of
+    a pixel gives coverage exactly 0.5 (two surfaces, equal colour weight), and which of
+    them the pixel centre sees is not in the images; with an odd ``supersample`` the centre
+    is a colour sample and a straight boundary between two surfaces gives the centre's
+    surface more than half the samples.
+
+    Args:
+        surfaces: the scene, as passed to `render_surfaces`.
+        grid: ``(U, V)`` angular resolution (each >= 3).
+        size: ``(H, W)`` view size in pixels.
+        supersample: colour samples per pixel along each axis, >= 1 (as `render_surfaces`).
+
+    Returns:
+        ``(U, V, H, W)`` float32 in ``(0, 1]``, multiples of ``1 / supersample²``.
+
+    Raises:
+        ValueError: on an empty scene, a bad grid, size or supersample.
+    """
+    U, V, H, W = _check_scene(surfaces, grid, size)
+    if supersample < 1:
+        raise ValueError(f"supersample must be >= 1; got {supersample}")
+    dr, dc = view_offsets(U, V)
+    offsets = jnp.stack([dr.ravel(), dc.ravel()], axis=-1)
+    p = _pack(surfaces)
+    ss = int(supersample)
+    step = max(1, min(U * V, (1 << 22) // (H * W * ss * ss)))
+    parts = [_coverage(p, offsets[i : i + step], H=H, W=W, ss=ss) for i in range(0, U * V, step)]
+    return jnp.concatenate(parts).reshape(U, V, H, W).astype(jnp.float32)
 
 
 # ---- random scenes -------------------------------------------------------------------------

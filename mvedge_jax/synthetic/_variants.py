@@ -16,9 +16,21 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..lightfield import LightField
-from ._scene import DISC, N_SHADE, RECT, WHOLE, Surface, make_scene, render_surfaces
+from ._scene import (
+    DISC,
+    N_SHADE,
+    RECT,
+    WHOLE,
+    Surface,
+    make_scene,
+    render_surfaces,
+    scene_surfaces,
+)
 
 VARIANTS = ("textureless", "slanted", "thin", "wide", "glossy")
+
+#: GT disparity range requested of `make_scene` for the ``"wide"`` variant.
+WIDE_RANGE = (-4.0, 4.0)
 
 _N_MODES = 6  # rows of `Surface.noise`
 
@@ -226,7 +238,7 @@ def variant_scene(
     *,
     grid: tuple[int, int] = (9, 9),
     size: tuple[int, int] = (128, 128),
-    supersample: int = 2,
+    supersample: int = 3,
 ) -> LightField:
     """A synthetic light field that stresses one difficulty, with exact GT in every view.
 
@@ -254,7 +266,12 @@ def variant_scene(
         grid: ``(U, V)`` angular resolution.
         size: ``(H, W)`` view size in pixels (the geometry scales with it; bar widths do
             not).
-        supersample: colour samples per pixel along each axis (anti-aliasing).
+        supersample: colour samples per pixel along each axis (anti-aliasing). Odd by
+            default, as the default scene's, so that a pixel's ground truth (its centre's
+            surface) is the surface of most of its colour samples at a straight boundary
+            (`render_coverage`; with 2, 63–79 % of the variants' pixels that an occlusion
+            boundary crosses mix two surfaces half and half, and the side their centre is
+            on is not in the images).
 
     Returns:
         A `LightField` named ``"synthetic-<kind>"`` with ``gt_disparity`` and ``gt_mask``
@@ -269,15 +286,13 @@ def variant_scene(
     """
     if kind not in VARIANTS:
         raise ValueError(f"unknown synthetic variant {kind!r}; use one of {VARIANTS}")
-    H, W = (int(s) for s in size)
     if kind == "wide":
         lf = make_scene(
-            seed, grid=grid, size=size, disparity_range=(-4.0, 4.0), supersample=supersample
+            seed, grid=grid, size=size, disparity_range=WIDE_RANGE, supersample=supersample
         )
         return dataclasses.replace(lf, name="synthetic-wide")
     rng = np.random.default_rng(seed)
-    build = {"textureless": _textureless, "slanted": _slanted, "thin": _thin, "glossy": _glossy}
-    surfaces = build[kind](rng, H, W)
+    surfaces = _build(kind, rng, size)
     lf = render_surfaces(
         surfaces, grid=grid, size=size, supersample=supersample, name=f"synthetic-{kind}"
     )
@@ -285,6 +300,35 @@ def variant_scene(
         noise = rng.normal(0.0, GLOSS_NOISE, lf.views.shape).astype(np.float32)
         lf = dataclasses.replace(lf, views=jnp.clip(lf.views + noise, 0.0, 1.0))
     return lf
+
+
+def _build(kind: str, rng: np.random.Generator, size) -> list[Surface]:
+    H, W = (int(s) for s in size)
+    build = {"textureless": _textureless, "slanted": _slanted, "thin": _thin, "glossy": _glossy}
+    return build[kind](rng, H, W)
+
+
+def variant_surfaces(
+    kind: str,
+    seed: int = 0,
+    *,
+    grid: tuple[int, int] = (9, 9),
+    size: tuple[int, int] = (128, 128),
+) -> list[Surface]:
+    """The surfaces of `variant_scene` (same arguments, same layout and textures), without
+    rendering: for `render_coverage` or `render_object_ids`.
+
+    The glossy variant's render noise is added to the rendered views and is not part of the
+    surfaces.
+
+    Raises:
+        ValueError: on an unknown kind.
+    """
+    if kind not in VARIANTS:
+        raise ValueError(f"unknown synthetic variant {kind!r}; use one of {VARIANTS}")
+    if kind == "wide":
+        return scene_surfaces(seed, grid=grid, size=size, disparity_range=WIDE_RANGE)
+    return _build(kind, np.random.default_rng(seed), size)
 
 
 def variant_scenes(seed: int = 0, **kwargs) -> dict[str, LightField]:

@@ -6,15 +6,19 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from mvedge_jax.lightfield import srgb_to_linear
 from mvedge_jax.synthetic import (
     GLOSS_NOISE,
     N_SHADE,
+    RECT,
     VARIANTS,
     WHOLE,
     Surface,
+    render_coverage,
     render_surfaces,
     variant_scene,
     variant_scenes,
+    variant_surfaces,
 )
 
 SMALL = {"grid": (3, 3), "size": (64, 64), "supersample": 1}
@@ -84,6 +88,68 @@ def test_wide_range(scenes):
 def test_unknown_variant():
     with pytest.raises(ValueError, match="unknown synthetic variant 'foggy'"):
         variant_scene("foggy")
+
+
+def _two_flat_surfaces():
+    """A flat dark background and a flat bright band (a rotated rectangle much longer than
+    the views): two straight edges, no corner in view, crossing the pixels of every view at
+    varying sub-pixel positions (disparity 0.37 against −0.5)."""
+    back = Surface(plane=(-0.5, 0.0, 0.0), kind=WHOLE, base=(0.1, 0.2, 0.3))
+    front = Surface(
+        plane=(0.37, 0.0, 0.0),
+        kind=RECT,
+        centre=(0.3, -0.2),
+        half_size=(7.3, 1000.0),
+        angle=0.3,
+        base=(0.9, 0.7, 0.5),
+    )
+    return [back, front]
+
+
+@pytest.mark.parametrize("supersample", [2, 3, 5])
+def test_coverage_is_the_colour_mixture_of_the_ground_truth_surface(supersample):
+    """Two flat surfaces: each pixel's linear colour is ``c A + (1 − c) B`` with ``c`` the
+    coverage of its ground-truth surface; an odd supersampling gives the ground-truth surface
+    most of every pixel's colour at these straight boundaries, an even one leaves pixels mixed
+    exactly half and half."""
+    surfaces = _two_flat_surfaces()
+    kw = {"grid": (3, 3), "size": (24, 32), "supersample": supersample}
+    lf = render_surfaces(surfaces, **kw)
+    cov = np.asarray(render_coverage(surfaces, **kw))
+    assert cov.shape == (3, 3, 24, 32) and cov.dtype == np.float32
+    front = np.asarray(lf.gt_disparity) > 0
+    lin = np.asarray(srgb_to_linear(lf.views))
+    a = np.asarray(srgb_to_linear(np.array([0.9, 0.7, 0.5])))
+    b = np.asarray(srgb_to_linear(np.array([0.1, 0.2, 0.3])))
+    own, other = np.where(front[..., None], a, b), np.where(front[..., None], b, a)
+    expected = cov[..., None] * own + (1 - cov[..., None]) * other
+    np.testing.assert_allclose(lin, expected, atol=2e-3)
+    mixed = cov < 1
+    assert mixed.sum() > 100 and front.sum() > 100
+    if supersample % 2:
+        assert cov.min() > 0.5
+    else:
+        assert np.sum(cov == 0.5) > 0.2 * mixed.sum()
+
+
+def test_variant_surfaces_render_the_variant_scene():
+    for kind in ("thin", "wide"):
+        kw = {"grid": (3, 3), "size": (48, 48)}
+        lf = variant_scene(kind, seed=2, **kw)
+        again = render_surfaces(variant_surfaces(kind, seed=2, **kw), supersample=3, **kw)
+        np.testing.assert_array_equal(np.asarray(lf.views), np.asarray(again.views))
+        np.testing.assert_array_equal(np.asarray(lf.gt_disparity), np.asarray(again.gt_disparity))
+    with pytest.raises(ValueError, match="unknown synthetic variant"):
+        variant_surfaces("foggy")
+
+
+def test_render_coverage_rejects_bad_input():
+    with pytest.raises(ValueError, match="supersample must be >= 1"):
+        render_coverage(_two_flat_surfaces(), supersample=0)
+    with pytest.raises(ValueError, match="at least one surface"):
+        render_coverage([])
+    with pytest.raises(ValueError, match="grid must be at least"):
+        render_coverage(_two_flat_surfaces(), grid=(2, 9))
 
 
 def test_surface_shading_changes_colour_with_the_view():
