@@ -187,7 +187,7 @@ class SharpenConfig(eqx.Module):
     refine_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     refine_near_weight: Array = hyperparameter(2.0, differentiable=False, lower=0.0)
     matte_jump: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
-    matte_view_jump: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
+    matte_view_jump: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     matte_view_tolerance: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.15, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)

@@ -11,7 +11,7 @@ from scipy.ndimage import grey_dilation, grey_erosion, minimum_filter
 from mvedge_jax.lightfield import linear_to_srgb, srgb_to_linear
 from mvedge_jax.reconstruct import SharpenConfig, boundary_matte, observed_background
 from mvedge_jax.reconstruct._centre import colour_guide
-from mvedge_jax.reconstruct._matte import pixel_subset
+from mvedge_jax.reconstruct._matte import LIST_STEPS, largest_jumps, pixel_subset
 from mvedge_jax.synthetic import make_scene
 
 FG, BG = 1.5, -0.5
@@ -331,4 +331,30 @@ def test_pixel_subset_is_the_first_pixels_of_the_mask(n, capacity, fraction):
     expected = jnp.nonzero(where, size=capacity, fill_value=n)[0]
     np.testing.assert_array_equal(
         np.asarray(jax.jit(pixel_subset, static_argnums=1)(where, capacity)), expected
+    )
+
+
+def test_largest_jumps_keeps_the_list_for_the_largest_jumps():
+    """Three maps of 20×20 pixels in 2×2 blocks (so that counting every other row and column
+    is exact), jump 0.5, a list of 40: the first has 24 pixels above 0.5 (all kept); the
+    second 120 above 0.5 of which 32 above 0.75 (the 1.5× step: kept, the 1.25× step's 80 do
+    not fit); the third 200 above even 8 × 0.5 (that step's mask)."""
+    rng = np.random.default_rng(0)
+    blocks = np.zeros((3, 100), np.float32)
+    blocks[0, rng.choice(100, 6, replace=False)] = 0.6
+    idx = rng.permutation(100)
+    blocks[1, idx[:30]] = 0.55
+    blocks[1, idx[:20]] = 0.7
+    blocks[1, idx[:8]] = 0.9
+    blocks[2, :50] = 5.0
+    blocks[2, 50:60] = 0.6
+    span = np.repeat(np.repeat(blocks.reshape(3, 10, 10), 2, axis=1), 2, axis=2)
+    got = np.asarray(largest_jumps(jnp.asarray(span), 0.5, 40))
+    np.testing.assert_array_equal(got[0], span[0] > 0.5)
+    np.testing.assert_array_equal(got[1], span[1] > 0.75)
+    assert got[1].sum() == 32
+    np.testing.assert_array_equal(got[2], span[2] > 0.5 * LIST_STEPS[-1])
+    # A list that holds every pixel above the jump changes nothing.
+    np.testing.assert_array_equal(
+        np.asarray(largest_jumps(jnp.asarray(span), 0.5, 400)), span > 0.5
     )
