@@ -39,7 +39,6 @@ from mvedge_jax.synthetic import (
     variant_scene,
     variant_surfaces,
 )
-from mvedge_jax.synthetic._variants import _textureless
 
 CLASSES = {
     "inside": lambda c: c == 1.0,
@@ -93,8 +92,8 @@ def scenes(names: list[str], supersamples: list[int]):
 
 def textureless_twins(size=(128, 128), grid=(9, 9)) -> list[dict]:
     """The textureless variant against itself with the floor's slope changed (point 2)."""
-    H, W = size
-    surfaces = _textureless(np.random.default_rng(0), H, W)
+    H = size[0]
+    surfaces = variant_surfaces("textureless", grid=grid, size=size)
     floor = surfaces[1]
     a, b, c = floor.plane
     top = 0.1 * H  # the floor's top edge, centre-view pixels below the image centre
