@@ -389,7 +389,7 @@ class EpiConfig(eqx.Module):
     cross_hair_fill: bool = static(True)
     fill_choice: str = static("colour", choices=FILL_CHOICES)
     visibility_fill: bool = static(True)
-    visibility_tol: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
+    visibility_tol: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
     solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
 
     def __check_init__(self):
