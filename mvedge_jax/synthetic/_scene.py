@@ -304,7 +304,7 @@ def render_surfaces(
         supersample: colour samples per pixel along each axis (anti-aliasing), >= 1. An
             odd value makes the pixel centre, where the ground truth is taken, one of the
             samples; with an even value the pixels a straight occlusion boundary halves mix
-            the two surfaces equally and their ground truth is not in the images
+            the two surfaces equally and their ground truth is not in their colour
             (`render_coverage`).
         name: scene name stored in the `LightField`.
         disparity_range: stored in the `LightField`; defaults to the range of the GT.
@@ -369,7 +369,7 @@ def render_coverage(
     ground-truth surface. 1 inside a surface; below 1 on pixels an occlusion boundary crosses
     (mixed pixels). With an even ``supersample`` a straight boundary through the middle of
     a pixel gives coverage exactly 0.5 (two surfaces, equal colour weight), and which of
-    them the pixel centre sees is not in the images; with an odd ``supersample`` the centre
+    them the pixel centre sees is not in the pixel's colour; with an odd ``supersample`` the centre
     is a colour sample and a straight boundary between two surfaces gives the centre's
     surface more than half the samples.
 

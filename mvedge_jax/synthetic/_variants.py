@@ -271,7 +271,7 @@ def variant_scene(
             surface) is the surface of most of its colour samples at a straight boundary
             (`render_coverage`; with 2, 63–79 % of the variants' pixels that an occlusion
             boundary crosses mix two surfaces half and half, and the side their centre is
-            on is not in the images).
+            on is not in their colour).
 
     Returns:
         A `LightField` named ``"synthetic-<kind>"`` with ``gt_disparity`` and ``gt_mask``
