@@ -9,7 +9,7 @@
    by the coverage of the pixel's ground-truth surface (`render_coverage`: the share of the
    pixel's colour samples that see the surface at its centre): ``inside`` (1), ``majority``
    (between 0.5 and 1), ``tie`` (exactly 0.5: the two surfaces mixed half and half, so which
-   one the centre sees is not in the images) and ``minority`` (below 0.5: corners and
+   one the centre sees is not in the pixel's colour) and ``minority`` (below 0.5: corners and
    junctions). Printed per scene: MSE×100 over all views, the worst view's, the centre view's,
    and the all-views MSE×100 that each class contributes, with its share of the pixels.
 2. The textureless variant's floor is one colour and its outline does not depend on its
@@ -92,11 +92,10 @@ def scenes(names: list[str], supersamples: list[int]):
 
 def textureless_twins(size=(128, 128), grid=(9, 9)) -> list[dict]:
     """The textureless variant against itself with the floor's slope changed (point 2)."""
-    H = size[0]
     surfaces = variant_surfaces("textureless", grid=grid, size=size)
     floor = surfaces[1]
     a, b, c = floor.plane
-    top = 0.1 * H  # the floor's top edge, centre-view pixels below the image centre
+    top = floor.centre[1] - floor.half_size[1]  # the floor's top edge (centre-view Y)
     base = render_surfaces(surfaces, grid=grid, size=size, supersample=3)
     rows = []
     for slope in (0.0, 2 * c):

@@ -295,7 +295,8 @@ def largest_jumps(
     each threshold are counted on every other row and column (times 4: one pass over a
     quarter of the map, ~30 ms for 80 maps of 512²), so a map can exceed ``capacity`` by a
     few pixels, which the list then leaves out. A map whose pixels exceed even the largest
-    threshold more than ``capacity`` times gets that threshold's mask.
+    threshold more than ``capacity`` times gets that threshold's mask. A list that holds the
+    whole map takes every pixel above ``jump`` (nothing is counted).
 
     Args:
         span: ``(N, H, W)`` disparity range of each pixel's window (pixels per view step).
@@ -306,6 +307,8 @@ def largest_jumps(
         ``(N, H, W)`` bool.
     """
     span = jnp.asarray(span)
+    if capacity >= span[0].size:
+        return span > jump
     thresholds = jnp.asarray(jump, span.dtype) * jnp.asarray(LIST_STEPS, span.dtype)
     k_max = len(LIST_STEPS)
     sub = span[:, ::2, ::2]

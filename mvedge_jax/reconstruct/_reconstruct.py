@@ -428,8 +428,7 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     capacity = min(n, max(4096, -(-n // 16)))
     lo, hi = jax.vmap(jax.vmap(lambda m: _window_extrema(m, 1)))(disparity)
     surface = smooth_surface(disparity, lo, hi, sc.matte_view_tolerance)
-    span = (hi - lo)[r_j, c_j]
-    edge = largest_jumps(span, jump, capacity) if capacity < n else span > jump
+    edge = largest_jumps((hi - lo)[r_j, c_j], jump, capacity)
     # A view without an image (partial grids) has no colour to compare: no samples.
     edge = edge & present[r_j, c_j][:, None, None]
     flat = jax.vmap(lambda m: pixel_subset(m.ravel(), capacity))(edge)
