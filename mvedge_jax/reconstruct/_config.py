@@ -90,6 +90,12 @@ class SharpenConfig(eqx.Module):
             linear light in [0, 1] by default).
         matte_impure_weight: (threshold) weight of window pixels on a discontinuity in the colour
             means.
+        matte_snap: (threshold) `boundary_matte`'s ``snap`` for the centre map: a decided
+            pixel whose value differs from its side's mean disparity by more than this
+            fraction of the two sides' difference takes that mean (dimensionless; a large
+            value: a pixel on its side keeps its value).
+        matte_view_snap: (threshold) the same for the maps of the other views
+            (``matte_views``); 0: every pixel the views' matte decides takes its side's mean.
         matte_max_residual: (threshold) `boundary_matte` decides only where the pixel's
             colour lies within this squared distance of the line through the foreground and
             background colours, relative to their squared distance (its ``max_residual``;
@@ -191,6 +197,8 @@ class SharpenConfig(eqx.Module):
     matte_view_tolerance: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     matte_min_separation: Array = hyperparameter(0.15, differentiable=False, lower=0.0)
     matte_impure_weight: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
+    matte_snap: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
+    matte_view_snap: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)

@@ -21,6 +21,7 @@ def boundary_matte(
     impure_weight: float | Array = 0.05,
     min_separation: float | Array = 0.1,
     max_residual: float | Array = float("inf"),
+    snap: float | Array = float("inf"),
     background: Float[ArrayLike, "H W C"] | None = None,
     background_valid: Bool[ArrayLike, "H W"] | None = None,
 ) -> Float[Array, "H W"]:
@@ -47,7 +48,11 @@ def boundary_matte(
     whose window lacks one of the two sides, pixels whose colour lies off the line through
     ``B`` and ``F`` by more than ``max_residual`` (squared distance ``|c − B − α (F − B)|²``
     relative to ``|F − B|²``: a third colour the two-colour model does not explain, as
-    between fine repeated structures), and near-ties ``|α − 1/2| ≤ 10⁻³``. With
+    between fine repeated structures), and near-ties ``|α − 1/2| ≤ 10⁻³``. A decided pixel
+    already on its side whose value differs from that side's mean (``D_F`` or ``D_B``) by
+    more than ``snap · |D_F − D_B|`` takes the mean as well: a value between the two
+    surfaces, left where a blur or an average mixed them, belongs to neither (``snap = 0``:
+    every decided pixel takes its side's mean; ``inf``: it keeps its value). With
     ``background`` (e.g. `observed_background`): where ``background_valid``, ``B`` is that
     colour, the background surface at the pixel itself as another view sees it unoccluded,
     instead of the window mean, which texture next to the edge biases. One pass;
@@ -73,6 +78,9 @@ def boundary_matte(
         min_separation: minimum colour distance ``|F − B|`` (guide units) to decide.
         max_residual: largest squared distance of the pixel's colour from the ``B``–``F``
             line, relative to ``|F − B|²`` (dimensionless), to decide; ``inf`` = no test.
+        snap: largest difference, relative to ``|D_F − D_B|`` (dimensionless, >= 0), between
+            a decided pixel's value and its side's mean disparity that it keeps; ``inf``: a
+            pixel on its side keeps its value.
         background: ``(H, W, C)`` background colour behind every pixel (guide units), or
             ``None`` (the window mean everywhere).
         background_valid: ``(H, W)`` bool, where ``background`` holds (with ``background``).
@@ -159,6 +167,8 @@ def boundary_matte(
     # meet, the mean background of the window can look like the foreground's colour.
     decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
     new = jnp.where(alpha > 0.5, jnp.where(is_fg, d, d_f), jnp.where(is_fg, d_b, d))
+    side = jnp.where(alpha > 0.5, d_f, d_b)
+    new = jnp.where(jnp.abs(new - side) > snap * jnp.abs(d_f - d_b), side, new)
     return jnp.where(decide, new, d)
 
 

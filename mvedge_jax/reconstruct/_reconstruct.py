@@ -377,11 +377,12 @@ def _matte(
     guide: Array,
     config: ReconstructConfig,
     jump: Array,
+    snap: Array,
     background: tuple[Array, Array] | None = None,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
-    config's settings, the discontinuity threshold ``jump`` and optionally an observed
-    ``(background colour, valid)`` (`observed_background`)."""
+    config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
+    optionally an observed ``(background colour, valid)`` (`observed_background`)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     return boundary_matte(
@@ -393,6 +394,7 @@ def _matte(
         impure_weight=sc.matte_impure_weight,
         min_separation=sc.matte_min_separation,
         max_residual=sc.matte_max_residual,
+        snap=snap,
         background=colour,
         background_valid=valid,
     )
@@ -407,13 +409,13 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     others = np.nonzero((np.arange(U)[:, None] != rc) | (np.arange(V)[None, :] != cc))
     r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
     same = sc.matte_colour == config.colour_space
-    jump = sc.matte_view_jump
+    jump, snap = sc.matte_view_jump, sc.matte_view_snap
     if sc.matte_view_steps == 0:
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         matted = lax.map(
-            lambda pair: _matte(pair[0], pair[1], config, jump), (disparity[r_j, c_j], own)
+            lambda pair: _matte(pair[0], pair[1], config, jump, snap), (disparity[r_j, c_j], own)
         )
         return disparity.at[r_j, c_j].set(matted)
     # The samples come from every view, the centre included.
@@ -451,7 +453,7 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
 
     def one(args):
         d, guide, f, col, ok = args
-        return _matte(d, guide, config, jump, samples_to_frame(f, col, ok, (H, W)))
+        return _matte(d, guide, config, jump, snap, samples_to_frame(f, col, ok, (H, W)))
 
     matted = lax.map(one, (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid))
     return disparity.at[r_j, c_j].set(matted)
@@ -506,7 +508,8 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         rc_j, cc_j = jnp.int32(rc), jnp.int32(cc)
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
-        sharp = _matte(sharp, colour_guide(views[rc, cc], sc.matte_colour), config, sc.matte_jump)
+        guide = colour_guide(views[rc, cc], sc.matte_colour)
+        sharp = _matte(sharp, guide, config, sc.matte_jump, sc.matte_snap)
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
         offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)

@@ -121,6 +121,30 @@ def test_matte_leaves_colours_off_the_two_colour_line_alone():
     np.testing.assert_allclose(tested, gt, atol=1e-5)
 
 
+@pytest.mark.parametrize("edge", [10.3, 10.7])
+def test_matte_snaps_values_between_the_two_surfaces(edge):
+    gt, img = _edge_scene(edge)
+    # A map averaged across the edge (as a merge of two views' values or a blur leaves
+    # it): the pixels next to the edge hold values between the two surfaces.
+    d = gt.copy()
+    d[:, 1:-1] = (gt[:, :-2] + gt[:, 1:-1] + gt[:, 2:]) / 3
+    between = (d > BG + 0.1) & (d < FG - 0.1)
+    assert between[:, 10:12].all()
+    kept = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img)))
+    # Without snapping a pixel already on its side keeps its value: some stay between.
+    assert ((kept > BG + 0.1) & (kept < FG - 0.1)).any()
+    assert np.abs(kept - gt)[:, 2:-2].max() > 0.6
+    snapped = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img), snap=0.1))
+    # Each pixel is on its ground truth's side, at its side's mean: that mean includes the
+    # averaged pixels above and below it (at their impure weight), hence the tolerance.
+    np.testing.assert_allclose(snapped[:, 2:-2], gt[:, 2:-2], atol=0.15)
+    # snap = 0: every decided pixel takes its side's mean; pixels off the edge stay.
+    every = np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img), snap=0.0))
+    np.testing.assert_allclose(every[:, 2:-2], gt[:, 2:-2], atol=0.15)
+    np.testing.assert_array_equal(every[:, :7], d[:, :7])
+    np.testing.assert_array_equal(every[:, 15:], d[:, 15:])
+
+
 def test_matte_vmaps_over_views():
     gts, imgs = zip(*(_edge_scene(e) for e in (10.2, 10.8)), strict=True)
     d = jnp.asarray(np.stack([np.roll(g, 1, axis=1) for g in gts]))

@@ -146,3 +146,22 @@ def test_view_matte_takes_the_observed_background(small_scene):
     others[U // 2, V // 2] = False
     before, after = _per_view_mse(window, lf)[others], _per_view_mse(default, lf)[others]
     assert after.mean() < before.mean() and after.max() <= before.max(), (before, after)
+
+
+def test_view_matte_snaps_to_the_side_means(small_scene):
+    # `matte_view_snap` acts on the other views' maps only, `matte_snap` on the centre map.
+    lf, edges, surface = small_scene
+    U, V = lf.grid
+    run = lambda **kw: reconstruct(
+        lf.views, edges, surface, ReconstructConfig(sharpen=SharpenConfig(**kw))
+    )
+    default, kept = run(), run(matte_view_snap=1e9)
+    assert float(SharpenConfig().matte_view_snap) == 0.0
+    assert float(SharpenConfig().matte_snap) == 1e9
+    np.testing.assert_array_equal(default.centre_sharp, kept.centre_sharp)
+    others = np.ones((U, V), bool)
+    others[U // 2, V // 2] = False
+    changed = np.any(np.asarray(default.disparity != kept.disparity), axis=(2, 3))
+    assert changed[others].all() and not changed[U // 2, V // 2]
+    centre = run(matte_snap=0.0)
+    assert not np.array_equal(centre.centre_sharp, default.centre_sharp)
