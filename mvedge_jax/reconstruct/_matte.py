@@ -166,10 +166,11 @@ def boundary_matte(
     # A pixel only joins a side that one of its 8 neighbours is on: where three surfaces
     # meet, the mean background of the window can look like the foreground's colour.
     decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
-    new = jnp.where(alpha > 0.5, jnp.where(is_fg, d, d_f), jnp.where(is_fg, d_b, d))
+    # A pixel off its chosen side, or on it but farther than ``snap`` from that side's mean,
+    # takes the mean.
     side = jnp.where(alpha > 0.5, d_f, d_b)
-    new = jnp.where(jnp.abs(new - side) > snap * jnp.abs(d_f - d_b), side, new)
-    return jnp.where(decide, new, d)
+    move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
+    return jnp.where(decide & move, side, d)
 
 
 # Directions (row, column) along which `observed_background` looks for the background.
