@@ -346,6 +346,10 @@ class EpiConfig(eqx.Module):
         eps: ``ε`` of eq 6.7, guide units.
         visibility_tol: (threshold) disparity margin of `contradicted_by_centre` in the
             ``visibility_fill`` test (pixels per view step).
+        colour_margin: (threshold) `colour_fill`'s ``margin`` for the 2-D fill with
+            ``fill_choice = "colour"`` (CIELAB / 100 or RGB, as ``colour_space``; L1 over the
+            channels): the colour-nearest of the four candidates replaces the farthest only
+            where its colour is closer by more than this.
 
     Attributes (static):
         cross_hair_fill: in every cross-hair view but the centre, the holes of the
@@ -398,6 +402,7 @@ class EpiConfig(eqx.Module):
     fill_choice: str = static("colour", choices=FILL_CHOICES)
     visibility_fill: bool = static(True)
     visibility_tol: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
+    colour_margin: Array = hyperparameter(0.3, differentiable=False, lower=0.0)
     solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
 
     def __check_init__(self):
@@ -412,16 +417,24 @@ class FillConfig(eqx.Module):
     are differentiable):
         c: smoothness numerator of the hole-filling solve of off-cross-hair views.
         data_weight: data weight of the reprojected pixels in that solve.
-        hole_weight: weight, in that solve, of the background fill
-            (`background_fill`) on holes: large = holes take the farther neighbouring surface,
+        hole_weight: weight, in that solve, of the 2-D fill (`colour_fill` with
+            ``colour_margin``) on holes: large = holes take the value of the 2-D fill,
             small = the colour-guided smoothness spreads the neighbours into them.
         min_confidence: (threshold) a merged pixel of an off-cross-hair view whose photometric
             confidence is at most this counts as a hole (0 = only pixels nothing landed on).
+        colour_margin: (threshold) `colour_fill`'s ``margin`` for the 2-D fill of the holes
+            (guide units as ``colour_space``, L1 over the channels): of the nearest valid
+            values left, right, above and below, the one whose pixel's colour is nearest to
+            the hole's replaces the farthest (the background a disocclusion shows) only where
+            its colour is closer by more than this; 1e9: always the farthest
+            (`background_fill`). A mixed pixel on a foreground boundary whose merged value
+            lost its photometric confidence is a hole too, and its colour finds the
+            foreground.
 
     Attributes (static):
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
-            (`background_fill` alone: the farthest of the nearest valid values left, right,
-            above and below) for off-cross-hair views.
+            (the 2-D fill alone, `colour_fill` with ``colour_margin``) for off-cross-hair
+            views.
         merge: ``"photo"`` (photometric-confidence-weighted mean of the two reprojections of an
             off-cross-hair view) or ``"mean"`` (the thesis' plain mean).
         crack_parallax: forwarded to `forward_project`.
@@ -440,6 +453,7 @@ class FillConfig(eqx.Module):
     data_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
     hole_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
     min_confidence: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
+    colour_margin: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
     hole_fill: str = static("solve", choices=HOLE_FILLS)
     merge: str = static("photo", choices=MERGES)
     crack_parallax: float = static(0.5, lower=0.0)

@@ -171,52 +171,73 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     ``values``, ``conf``: ``(K, H, W)`` from `merge_reprojections` for the views
     ``(rows[k], cols[k])``; ``guides`` ``(U, V, H, W, C)``: every view's `colour_guide`;
     ``present`` ``(U, V)``: views that exist (a partial grid's missing views are all zero and
-    keep the background fill, having no guide). Returns ``(K, H, W)`` and the ``(K,)``
-    relative residuals of the solves (None with ``hole_fill = "background"``).
+    keep the 2-D fill, with no solve). Returns ``(K, H, W)`` and the ``(K,)`` relative
+    residuals of the solves (None with ``hole_fill = "background"``).
     """
     fc = config.fill
-    # A merged value whose colour matches poorly was carried across a disocclusion: a hole.
+    # A merged value whose colour matches poorly was carried across a disocclusion, or is a
+    # mixed pixel on a boundary: a hole.
     valid = conf > fc.min_confidence
-    # Over the whole stack, outside the per-view loop: fused into the merge inside the loop,
-    # the fill's gathers recomputed the merge (3.5 s against 0.3 s for 64 views at 512²).
-    filled = jax.vmap(background_fill)(values, valid)
+
+    # One view at a time: the loop's inputs are the merge's materialised outputs, and the
+    # guide of a view is sliced, not gathered for the whole stack (64 views of 512² RGB
+    # would take another 200 MB). A view missing from a partial grid has an all-zero guide:
+    # every candidate ties in colour and the fill is `background_fill`.
+    def fill(f, v, r, col):
+        return colour_fill(f, v, guides[r, col], fc.colour_margin)
+
     if fc.hole_fill == "background":
-        return filled, None
+        return lax.map(lambda a: fill(*a), (values, valid, rows, cols)), None
 
     def one(args):
         f, c, v, r, col = args
+        filled = fill(f, v, r, col)
         lam = jnp.where(v, fc.data_weight * c, fc.hole_weight)
         wx, wy = guide_edge_weights(guides[r, col], scale=fc.c, eps=config.epi.eps)
-        sol = solve_poisson(lam, f, wx, wy, x0=f, config=fc.solver)
-        return jnp.where(present[r, col], sol.x, f), jnp.where(present[r, col], sol.residual, 0)
+        sol = solve_poisson(lam, filled, wx, wy, x0=filled, config=fc.solver)
+        return (
+            jnp.where(present[r, col], sol.x, filled),
+            jnp.where(present[r, col], sol.residual, 0),
+        )
 
-    return lax.map(one, (filled, conf, valid, rows, cols))
+    return lax.map(one, (values, conf, valid, rows, cols))
 
 
 def colour_fill(
-    values: Float[ArrayLike, "H W"], valid: Bool[ArrayLike, "H W"], guide: Float[ArrayLike, "H W C"]
+    values: Float[ArrayLike, "H W"],
+    valid: Bool[ArrayLike, "H W"],
+    guide: Float[ArrayLike, "H W C"],
+    margin: float | Float[ArrayLike, ""] = 0.0,
 ) -> Float[Array, "H W"]:
     """Fill holes from the nearest valid value left, right, above or below whose pixel has
     the colour closest to the hole pixel's own.
 
     Of the (up to) four nearest valid pixels along the rows and columns, the one whose
     ``guide`` colour is nearest (L1 over the channels) to the hole pixel's ``guide`` colour
-    gives its value; among equally near colours the farthest (smallest) value wins. The hole
-    shows the surface that its colour matches, which a disocclusion behind a nearer surface
-    need not share with the farthest neighbour (`background_fill`). Pixels with no valid
-    value on any of the four rays stay 0. jit/vmap-able; piecewise a selection of the input
-    values (differentiable in them, not in the choice).
+    gives its value if that colour distance is smaller than the farthest (smallest) value's
+    by more than ``margin``; otherwise the farthest value does (as in `background_fill`).
+    Among equally near colours the farthest value wins. The hole shows the surface that its
+    colour matches, which a disocclusion behind a nearer surface need not share with the
+    farthest neighbour; where the colours barely tell the candidates apart (low contrast,
+    noise, view-dependent shading), the margin falls back to the background, which a hole
+    next to a depth edge mostly shows. ``margin = 0``: the colour alone decides; ``inf``:
+    `background_fill`. Pixels with no valid value on any of the four rays stay 0.
+    jit/vmap-able; piecewise a selection of the input values (differentiable in them, not
+    in the choice).
 
     Args:
         values: ``(H, W)`` disparity (pixels per view step), meaningful where ``valid``.
         valid: ``(H, W)`` bool, the pixels that keep their value.
         guide: ``(H, W, C)`` colour of the same view (e.g. its `colour_guide`).
+        margin: scalar >= 0 (guide units, L1 over the channels; may be traced): how much
+            closer in colour than the farthest value's pixel the chosen pixel must be.
 
     Returns:
         ``(H, W)`` filled disparity, the dtype of ``values``.
 
     Raises:
-        ValueError: on a non-2-D ``values``, or ``valid`` / ``guide`` of another ``(H, W)``.
+        ValueError: on a non-2-D ``values``, ``valid`` / ``guide`` of another ``(H, W)``, or
+            a negative or NaN ``margin`` given as a Python number.
 
     References:
         Not in the thesis (its angular inpainting leaves disocclusions to the EPI solve,
@@ -232,9 +253,11 @@ def colour_fill(
             f"valid must have shape {values.shape} and guide {values.shape + ('C',)}; got "
             f"{tuple(valid.shape)} and {tuple(guide.shape)}"
         )
+    if isinstance(margin, (int, float)) and not margin >= 0:
+        raise ValueError(f"margin must be >= 0; got {margin}")
     big = jnp.asarray(jnp.inf, values.dtype)
-    best_dist = jnp.full(values.shape, big)
-    best = jnp.full(values.shape, big)
+    best_dist = far_dist = jnp.full(values.shape, big)
+    best = far = jnp.full(values.shape, big)
     for axis in (0, 1):
         for reverse in (False, True):
             near, found = _nearest_index(valid, axis, reverse)
@@ -244,8 +267,12 @@ def colour_fill(
             better = found & ((dist < best_dist) | ((dist == best_dist) & (v < best)))
             best_dist = jnp.where(better, dist, best_dist)
             best = jnp.where(better, v, best)
-    best = jnp.where(jnp.isfinite(best), best, 0.0)
-    return jnp.where(valid, values, best)
+            farther = found & ((v < far) | ((v == far) & (dist < far_dist)))
+            far_dist = jnp.where(farther, dist, far_dist)
+            far = jnp.where(farther, v, far)
+    pick = jnp.where(best_dist < far_dist - jnp.asarray(margin, values.dtype), best, far)
+    pick = jnp.where(jnp.isfinite(pick), pick, 0.0)
+    return jnp.where(valid, values, pick)
 
 
 def contradicted_by_centre(
@@ -305,7 +332,7 @@ def _cross_hair_fill(
     ``guides`` ``(K, H, W, C)``: the views' colour guides."""
     ok = valid & (conf > config.epi.min_confidence)
     if config.epi.fill_choice == "colour":
-        view_bg = jax.vmap(colour_fill)(maps, ok, guides)
+        view_bg = jax.vmap(colour_fill, (0, 0, 0, None))(maps, ok, guides, config.epi.colour_margin)
     else:
         view_bg = jax.vmap(background_fill)(maps, ok)
     farther = jnp.minimum(maps, view_bg)
@@ -830,12 +857,13 @@ def propagate(
        `solve_poisson` per direction. Reprojected pixels whose colour does not match
        (photometric confidence ≤ ``epi.min_confidence``) count as holes. With
        ``config.epi.cross_hair_fill``, the holes of each cross-hair view then take the
-       farther of their inpainted value and the view's 2-D fill (`colour_fill`, or
-       `background_fill` with ``epi.fill_choice = "farthest"``).
+       farther of their inpainted value and the view's 2-D fill (`colour_fill` with
+       ``epi.colour_margin``, or `background_fill` with ``epi.fill_choice = "farthest"``).
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
-       filled (``config.fill.hole_fill``).
+       filled (``config.fill.hole_fill``) from the 2-D fill of `colour_fill` with
+       ``fill.colour_margin``.
     4. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre
        (reprojected boundaries are only pixel-accurate), discontinuities marked by
        ``sharpen.matte_view_jump``; with ``sharpen.matte_view_steps > 0`` its background
@@ -907,12 +935,12 @@ def reconstruct(
        ``epi.c / (|∇I_EPI| + epi.eps)``; one batched `solve_poisson` per direction.
        Reprojected pixels whose colour does not match count as holes; with
        ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the farther of
-       the inpainted value and the view's 2-D fill (`colour_fill`, or `background_fill`
-       with ``epi.fill_choice = "farthest"``).
+       the inpainted value and the view's 2-D fill (`colour_fill` with
+       ``epi.colour_margin``, or `background_fill` with ``epi.fill_choice = "farthest"``).
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and low-confidence pixels filled
-       (``config.fill.hole_fill``).
+       (``config.fill.hole_fill``; 2-D fill `colour_fill` with ``fill.colour_margin``).
     6. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre,
        with the background colours of `observed_background` (``sharpen.matte_view_steps``).
 

@@ -189,6 +189,8 @@ def test_centre_bad_input(small_scene):
         (FillConfig, dict(min_confidence=-0.1)),
         (EpiConfig, dict(min_confidence=-0.1)),
         (FillConfig, dict(hole_weight=-1.0)),
+        (FillConfig, dict(colour_margin=-0.1)),
+        (EpiConfig, dict(colour_margin=-0.1)),
     ],
 )
 def test_config_validation(cls, kwargs):

@@ -161,6 +161,21 @@ def test_colour_fill_breaks_colour_ties_towards_the_farthest():
     np.testing.assert_allclose(stack[1], background_fill(jnp.asarray(v), jnp.asarray(ok)))
 
 
+def test_colour_fill_margin_falls_back_to_the_farthest():
+    # The hole (yellow) matches the square to its left exactly (L1 distance 0); the farthest
+    # candidate, the blue background above it, is 2.2 away in colour.
+    v, ok, g = _hidden_square_view()
+    fill = jax.jit(colour_fill)
+    np.testing.assert_allclose(fill(v, ok, g, 2.1)[1:, 2:4], 1.0)
+    np.testing.assert_allclose(fill(v, ok, g, 2.3)[1:, 2:4], -1.0)
+    np.testing.assert_array_equal(fill(v, ok, g, np.inf), background_fill(jnp.asarray(v), ok))
+    # The margin is traced: one compilation for every value, also under vmap.
+    stack = jax.vmap(colour_fill, (None, None, None, 0))(v, ok, g, jnp.asarray([0.0, 3.0]))
+    np.testing.assert_allclose(stack[:, 2, 2], [1.0, -1.0])
+    with pytest.raises(ValueError, match="margin"):
+        colour_fill(v, ok, g, -0.1)
+
+
 def test_colour_fill_rejects_bad_shapes():
     v, ok, g = _hidden_square_view()
     with pytest.raises(ValueError, match="values must have shape"):
