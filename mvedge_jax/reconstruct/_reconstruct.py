@@ -203,6 +203,10 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     return lax.map(one, (values, conf, valid, rows, cols))
 
 
+#: Values within this of the farthest (pixels per view step) tie with it in `colour_fill`.
+_TIE = 1e-4
+
+
 def colour_fill(
     values: Float[ArrayLike, "H W"],
     valid: Bool[ArrayLike, "H W"],
@@ -220,7 +224,10 @@ def colour_fill(
     colour matches, which a disocclusion behind a nearer surface need not share with the
     farthest neighbour; where the colours barely tell the candidates apart (low contrast,
     noise, view-dependent shading), the margin falls back to the background, which a hole
-    next to a depth edge mostly shows. ``margin = 0``: the colour alone decides; ``inf``:
+    next to a depth edge mostly shows. Candidates within 10⁻⁴ of the farthest value tie with
+    it: the margin counts from the nearest colour among them, so that two equal farthest
+    values (copies of one value, as in filled cracks) that a perturbation separates do not
+    switch the decision. ``margin = 0``: the colour alone decides; ``inf``:
     `background_fill`. Pixels with no valid value on any of the four rays stay 0.
     jit/vmap-able; piecewise a selection of the input values (differentiable in them, not
     in the choice).
@@ -256,20 +263,26 @@ def colour_fill(
     if isinstance(margin, (int, float)) and not margin >= 0:
         raise ValueError(f"margin must be >= 0; got {margin}")
     big = jnp.asarray(jnp.inf, values.dtype)
-    best_dist = far_dist = jnp.full(values.shape, big)
-    best = far = jnp.full(values.shape, big)
+    best_dist = jnp.full(values.shape, big)
+    best = jnp.full(values.shape, big)
+    cands, dists = [], []
     for axis in (0, 1):
         for reverse in (False, True):
             near, found = _nearest_index(valid, axis, reverse)
-            v = jnp.take_along_axis(values, near, axis=axis)
+            v = jnp.where(found, jnp.take_along_axis(values, near, axis=axis), big)
             g = jnp.take_along_axis(guide, near[..., None], axis=axis)
             dist = jnp.where(found, jnp.sum(jnp.abs(g - guide), axis=-1), big)
             better = found & ((dist < best_dist) | ((dist == best_dist) & (v < best)))
             best_dist = jnp.where(better, dist, best_dist)
             best = jnp.where(better, v, best)
-            farther = found & ((v < far) | ((v == far) & (dist < far_dist)))
-            far_dist = jnp.where(farther, dist, far_dist)
-            far = jnp.where(farther, v, far)
+            cands.append(v)
+            dists.append(dist)
+    cands, dists = jnp.stack(cands), jnp.stack(dists)
+    far = jnp.min(cands, axis=0)
+    # The farthest value's colour distance: the nearest colour among the candidates within
+    # `_TIE` of it, so that two (nearly) equal farthest values crossing each other do not
+    # switch the comparison with the margin (copies of one value are common: filled cracks).
+    far_dist = jnp.min(jnp.where(cands <= far + _TIE, dists, big), axis=0)
     pick = jnp.where(best_dist < far_dist - jnp.asarray(margin, values.dtype), best, far)
     pick = jnp.where(jnp.isfinite(pick), pick, 0.0)
     return jnp.where(valid, values, pick)

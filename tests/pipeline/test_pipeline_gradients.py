@@ -41,7 +41,10 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
     samples of the centre diffusion close enough to the labels to exist in a 32² view, no
     reprojected pixel's photometric confidence within the finite-difference step of the
     cross-hair threshold ``epi.min_confidence``: at the default 0.1 one is, and
-    ``epi.photo_sigma`` ± 1e-7 flips it)."""
+    ``epi.photo_sigma`` ± 1e-7 flips it; the cross-hair holes' colour choice at margin 0:
+    with the margins 0.25–0.35 a discrete choice of the cross-hair fill flips within the step
+    of ``edges.filter.edge_shift``, whose difference quotient is then −0.069 against a
+    gradient of 0.0024)."""
     tight = SolverConfig(rtol=1e-12, max_iters=5000)
     tight_j = SolverConfig(preconditioner="jacobi", rtol=1e-12, max_iters=20000)
     return with_values(
@@ -54,6 +57,7 @@ def _tight(config: PipelineConfig) -> PipelineConfig:
             "reconstruct.centre.solver": tight,
             "reconstruct.seeds.min_distance": 2,
             "reconstruct.epi.min_confidence": 0.12,
+            "reconstruct.epi.colour_margin": 0.0,
             "reconstruct.epi.solver": tight_j,
             "reconstruct.fill.solver": tight_j,
         },

@@ -176,6 +176,21 @@ def test_colour_fill_margin_falls_back_to_the_farthest():
         colour_fill(v, ok, g, -0.1)
 
 
+def test_colour_fill_margin_is_stable_where_the_farthest_values_tie():
+    # A hole between four valid pixels: two farthest values (0.0) of colour distance 0.3 and
+    # 1.0, and a nearer one (2.0) at distance 0.1. The margin counts from the tie's nearer
+    # colour (0.3) whichever of the two is a hair farther.
+    v = np.array([[9, 0.0, 9], [2.0, 0, 0.0], [9, 5.0, 9]], np.float32)
+    ok = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], bool)
+    g = np.zeros((3, 3, 3), np.float32)
+    g[0, 1, 0], g[1, 2, 0], g[1, 0, 0], g[2, 1, 0] = 0.3, 1.0, 0.1, 2.0
+    for eps in (0.0, 1e-6, -1e-6):
+        w = v.copy()
+        w[1, 2] += eps
+        assert float(colour_fill(w, ok, g, 0.15)[1, 1]) == 2.0  # 0.1 < 0.3 - 0.15
+        assert float(colour_fill(w, ok, g, 0.25)[1, 1]) == pytest.approx(min(0.0, eps))
+
+
 def test_colour_fill_rejects_bad_shapes():
     v, ok, g = _hidden_square_view()
     with pytest.raises(ValueError, match="values must have shape"):
