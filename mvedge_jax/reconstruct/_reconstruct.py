@@ -263,21 +263,18 @@ def colour_fill(
     if isinstance(margin, (int, float)) and not margin >= 0:
         raise ValueError(f"margin must be >= 0; got {margin}")
     big = jnp.asarray(jnp.inf, values.dtype)
-    best_dist = jnp.full(values.shape, big)
-    best = jnp.full(values.shape, big)
     cands, dists = [], []
     for axis in (0, 1):
         for reverse in (False, True):
             near, found = _nearest_index(valid, axis, reverse)
-            v = jnp.where(found, jnp.take_along_axis(values, near, axis=axis), big)
             g = jnp.take_along_axis(guide, near[..., None], axis=axis)
-            dist = jnp.where(found, jnp.sum(jnp.abs(g - guide), axis=-1), big)
-            better = found & ((dist < best_dist) | ((dist == best_dist) & (v < best)))
-            best_dist = jnp.where(better, dist, best_dist)
-            best = jnp.where(better, v, best)
-            cands.append(v)
-            dists.append(dist)
+            cands.append(jnp.where(found, jnp.take_along_axis(values, near, axis=axis), big))
+            dists.append(jnp.where(found, jnp.sum(jnp.abs(g - guide), axis=-1), big))
+    # (4, H, W): the four candidates' values and colour distances (inf where none).
     cands, dists = jnp.stack(cands), jnp.stack(dists)
+    # The colour-nearest candidate; among equal distances the farthest value.
+    best_dist = jnp.min(dists, axis=0)
+    best = jnp.min(jnp.where(dists == best_dist, cands, big), axis=0)
     far = jnp.min(cands, axis=0)
     # The farthest value's colour distance: the nearest colour among the candidates within
     # `_TIE` of it, so that two (nearly) equal farthest values crossing each other do not
