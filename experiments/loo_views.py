@@ -4,8 +4,9 @@
         [--criterion mse|mse+badpix] [--json OUT]
 
 ``PATH`` is a field of `PipelineConfig` by dotted path: an array field (`hyperparameter_paths`,
-e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer field (e.g.
-``reconstruct.sharpen.matte_view_steps``, one compilation per value); ``V0`` is the reference
+e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer, boolean (``true``,
+``false``) or string field (e.g. ``reconstruct.sharpen.matte_view_steps``,
+``reconstruct.epi.hole_value``; one compilation per value); ``V0`` is the reference
 value (normally the current default), against which the others are compared. For every
 synthetic scene with ground truth in every view (the default scene and
 `mvedge_jax.synthetic.VARIANTS`) and every value, the whole chain (`estimate_disparity`) runs
@@ -44,6 +45,13 @@ from mvedge_jax.synthetic import VARIANTS  # noqa: E402
 SCENES = ("default", *VARIANTS)
 
 
+def _fmt(value) -> str:
+    """A value of the grid as printed: numbers in ``g`` format, booleans and strings as they are."""
+    if isinstance(value, (bool, str)):
+        return str(value).lower() if isinstance(value, bool) else value
+    return f"{value:g}"
+
+
 def score_views(name: str, path: str, values: list) -> dict:
     """``{value: (all-views MSE×100, worst view MSE×100, all-views BadPix(0.07) %)}`` of one
     scene."""
@@ -58,7 +66,7 @@ def score_views(name: str, path: str, values: list) -> dict:
         badpix = 100 * float(np.mean(np.abs(d - gt) > 0.07))
         out[v] = (float(per_view.mean()), float(per_view.max()), badpix)
         print(
-            f"  {name} {path}={v:g}: all views {out[v][0]:.3f}, worst view {out[v][1]:.3f}, "
+            f"  {name} {path}={_fmt(v)}: all views {out[v][0]:.3f}, worst view {out[v][1]:.3f}, "
             f"BadPix(0.07) {badpix:.2f} ({time.perf_counter() - t:.0f} s)",
             flush=True,
         )
@@ -95,7 +103,7 @@ def main(argv=None) -> int:
     ap.add_argument(
         "path",
         help="PipelineConfig array field (e.g. reconstruct.sharpen.matte_view_jump) or static "
-        "integer field (e.g. reconstruct.sharpen.matte_view_steps)",
+        "integer, boolean or string field (e.g. reconstruct.sharpen.matte_view_steps)",
     )
     ap.add_argument("values", help="comma-separated values; the first is the reference")
     ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
@@ -114,12 +122,20 @@ def main(argv=None) -> int:
             current = get_path(PipelineConfig(), args.path)
         except AttributeError:
             current = None
-        if not isinstance(current, int) or isinstance(current, bool):
+        raw = args.values.split(",")
+        if isinstance(current, bool):
+            if any(v not in ("true", "false") for v in raw):
+                ap.error(f"{args.path!r} takes true or false; got {args.values!r}")
+            values = [v == "true" for v in raw]
+        elif isinstance(current, int):
+            values = [int(v) for v in raw]
+        elif isinstance(current, str):
+            values = raw
+        else:
             ap.error(
                 f"{args.path!r} is neither an array field of PipelineConfig (see "
-                "hyperparameter_paths) nor a static integer field"
+                "hyperparameter_paths) nor a static integer, boolean or string field"
             )
-        values = [int(v) for v in args.values.split(",")]
     scenes = [s.strip() for s in args.scenes.split(",")]
     unknown = [s for s in scenes if s not in SCENES]
     if unknown or len(values) < 2 or len(scenes) < 2:
@@ -129,27 +145,27 @@ def main(argv=None) -> int:
     ref = values[0]
     print(f"\ncriterion: {args.criterion}")
     print(
-        f"| held out | picked on the others | all views, {ref:g} → picked "
-        f"| worst view, {ref:g} → picked | BadPix(0.07), {ref:g} → picked |"
+        f"| held out | picked on the others | all views, {_fmt(ref)} → picked "
+        f"| worst view, {_fmt(ref)} → picked | BadPix(0.07), {_fmt(ref)} → picked |"
     )
     print("|---|---|---|---|---|")
     for r in rows:
         (a0, w0, b0), (a1, w1, b1) = r["reference"], r["held_out_score"]
         print(
-            f"| {r['held_out']} | {r['picked']:g} | {a0:.3f} → {a1:.3f} | {w0:.3f} → {w1:.3f} "
+            f"| {r['held_out']} | {_fmt(r['picked'])} | {a0:.3f} → {a1:.3f} | {w0:.3f} → {w1:.3f} "
             f"| {b0:.2f} → {b1:.2f} |"
         )
     for col, name in ((0, "All-views MSE×100"), (2, "All-views BadPix(0.07)")):
-        print(f"\n{name} ratio to {ref:g} ({', '.join(scenes)}):")
+        print(f"\n{name} ratio to {_fmt(ref)} ({', '.join(scenes)}):")
         for v in values[1:]:
             ratios = ", ".join(f"{scores[s][v][col] / scores[s][ref][col]:.3f}" for s in scenes)
-            print(f"{v:g}: {ratios}")
+            print(f"{_fmt(v)}: {ratios}")
     if args.json:
         payload = {
             "path": args.path,
             "values": values,
             "criterion": args.criterion,
-            "scores": {s: {f"{v:g}": sc for v, sc in d.items()} for s, d in scores.items()},
+            "scores": {s: {f"{_fmt(v)}": sc for v, sc in d.items()} for s, d in scores.items()},
             "loo": rows,
         }
         Path(args.json).write_text(json.dumps(payload, indent=1))

@@ -345,7 +345,10 @@ def _cross_hair_fill(
         view_bg = jax.vmap(colour_fill, (0, 0, 0, None))(maps, ok, guides, config.epi.colour_margin)
     else:
         view_bg = jax.vmap(background_fill)(maps, ok)
-    farther = jnp.minimum(maps, view_bg)
+    if config.epi.hole_value == "fill":
+        farther = view_bg
+    else:
+        farther = jnp.minimum(maps, view_bg)
     fallback = jnp.where(ok, maps, farther)
     if config.epi.visibility_fill:
         # The farther of the nearest valid values of the same pixel in the views before and
@@ -358,10 +361,13 @@ def _cross_hair_fill(
             cands, centre_map, offsets, tol
         )
         # `farther` is the inpainted value or the view background, pixel by pixel.
-        bad_farther = jnp.where(maps <= view_bg, bad[0], bad[1])
-        # Keep the farther of inpainted value and view background unless the centre view
-        # contradicts it; else the nearest of inpainted value, view background and angular
-        # background that the centre view does not contradict.
+        if config.epi.hole_value == "fill":
+            bad_farther = bad[1]
+        else:
+            bad_farther = jnp.where(maps <= view_bg, bad[0], bad[1])
+        # Keep `farther` (``hole_value``) unless the centre view contradicts it; else the
+        # nearest of inpainted value, view background and angular background that the
+        # centre view does not contradict.
         best = jnp.max(jnp.where(bad, -jnp.inf, cands), axis=0)
         chosen = jnp.where(bad_farther & ~jnp.all(bad, axis=0), best, farther)
         fallback = jnp.where(ok, maps, jnp.where(valid, farther, chosen))
@@ -867,8 +873,9 @@ def propagate(
        `solve_poisson` per direction. Reprojected pixels whose colour does not match
        (photometric confidence ≤ ``epi.min_confidence``) count as holes. With
        ``config.epi.cross_hair_fill``, the holes of each cross-hair view then take the
-       farther of their inpainted value and the view's 2-D fill (`colour_fill` with
-       ``epi.colour_margin``, or `background_fill` with ``epi.fill_choice = "farthest"``).
+       view's 2-D fill (`colour_fill` with ``epi.colour_margin``, or `background_fill` with
+       ``epi.fill_choice = "farthest"``; with ``epi.hole_value = "farther"`` the farther of
+       that and their inpainted value).
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
@@ -944,9 +951,10 @@ def reconstruct(
        edge points (including points not visible in the centre view), smoothness
        ``epi.c / (|∇I_EPI| + epi.eps)``; one batched `solve_poisson` per direction.
        Reprojected pixels whose colour does not match count as holes; with
-       ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the farther of
-       the inpainted value and the view's 2-D fill (`colour_fill` with
-       ``epi.colour_margin``, or `background_fill` with ``epi.fill_choice = "farthest"``).
+       ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the view's
+       2-D fill (`colour_fill` with ``epi.colour_margin``, or `background_fill` with
+       ``epi.fill_choice = "farthest"``; with ``epi.hole_value = "farther"`` the farther of
+       that and the inpainted value).
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and low-confidence pixels filled

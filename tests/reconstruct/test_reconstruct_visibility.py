@@ -71,3 +71,38 @@ def test_frame_strip_takes_the_surface_from_outside(visibility):
     np.testing.assert_array_equal(out[4, 2:10], np.asarray(pv)[4, 2:10])
     np.testing.assert_array_equal(out[4, 10:], 1.0)
     np.testing.assert_array_equal(out[4, :2], -2.0 if visibility else 1.0)
+
+
+@pytest.mark.parametrize("hole_value", ["farther", "fill"])
+def test_hole_value_chooses_between_the_blend_and_the_fill(hole_value):
+    """One row of 3 views (the centre is view 1). View 0: far background (disparity -3,
+    black) in columns 0-2, a mid-depth surface (0, white) in columns 6-8, and a hole in
+    columns 3-5 that shows the white surface, where the inpainting left a blend (-1.5). The
+    colour fill finds the white surface (0); ``"farther"`` keeps the blend, ``"fill"`` takes
+    the fill. Landed pixels and the centre view keep their values either way."""
+    K, H, W = 3, 4, 9
+    row = jnp.array([-3.0, -3.0, -3.0, -1.5, -1.5, -1.5, 0.0, 0.0, 0.0])
+    maps = jnp.broadcast_to(row, (K, H, W))
+    valid = jnp.ones((K, H, W), bool).at[0, :, 3:6].set(False)
+    white = (jnp.arange(W) >= 3).astype(jnp.float32)
+    guides = jnp.broadcast_to(white[None, None, :, None], (K, H, W, 3))
+    offsets = jnp.stack([jnp.zeros(K), jnp.arange(K) - 1.0], axis=1)
+    centre = jnp.full((H, W), 5.0)  # nearer than every candidate: nothing is contradicted
+    config = dataclasses.replace(
+        ReconstructConfig(), epi=EpiConfig(hole_value=hole_value, visibility_fill=False)
+    )
+    out = np.asarray(
+        _cross_hair_fill(maps, valid, jnp.ones_like(maps), 1, offsets, centre, guides, config)
+    )
+    expected = np.asarray(maps).copy()
+    expected[0, :, 3:6] = -1.5 if hole_value == "farther" else 0.0
+    np.testing.assert_array_equal(out, expected)
+    # With the visibility test the same values stand (the centre contradicts none of them).
+    vis = dataclasses.replace(config, epi=EpiConfig(hole_value=hole_value))
+    out_vis = _cross_hair_fill(maps, valid, jnp.ones_like(maps), 1, offsets, centre, guides, vis)
+    np.testing.assert_array_equal(np.asarray(out_vis), expected)
+
+
+def test_hole_value_is_checked():
+    with pytest.raises(ValueError, match="hole_value"):
+        EpiConfig(hole_value="nearest")
