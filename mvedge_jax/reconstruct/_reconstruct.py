@@ -345,32 +345,34 @@ def _cross_hair_fill(
         view_bg = jax.vmap(colour_fill, (0, 0, 0, None))(maps, ok, guides, config.epi.colour_margin)
     else:
         view_bg = jax.vmap(background_fill)(maps, ok)
+    # The value a hole takes: the view background, or the farther of it and the inpainted
+    # value (``hole_value = "farther"``).
     if config.epi.hole_value == "fill":
-        farther = view_bg
+        hole = view_bg
     else:
-        farther = jnp.minimum(maps, view_bg)
-    fallback = jnp.where(ok, maps, farther)
+        hole = jnp.minimum(maps, view_bg)
+    fallback = jnp.where(ok, maps, hole)
     if config.epi.visibility_fill:
         # The farther of the nearest valid values of the same pixel in the views before and
         # after along the cross-hair (the EPI's angular axis).
         epi_bg = _farthest_nearest(maps, ok, (0,))
-        epi_bg = jnp.where(jnp.isfinite(epi_bg), epi_bg, farther)
+        epi_bg = jnp.where(jnp.isfinite(epi_bg), epi_bg, hole)
         tol = config.epi.visibility_tol
         cands = jnp.stack([maps, view_bg, epi_bg])
         bad = jax.vmap(jax.vmap(contradicted_by_centre, (0, None, 0, None)), (0, None, None, None))(
             cands, centre_map, offsets, tol
         )
-        # `farther` is the inpainted value or the view background, pixel by pixel.
+        # `hole` is the view background or the inpainted value, pixel by pixel.
         if config.epi.hole_value == "fill":
-            bad_farther = bad[1]
+            bad_hole = bad[1]
         else:
-            bad_farther = jnp.where(maps <= view_bg, bad[0], bad[1])
-        # Keep `farther` (``hole_value``) unless the centre view contradicts it; else the
-        # nearest of inpainted value, view background and angular background that the
-        # centre view does not contradict.
+            bad_hole = jnp.where(maps <= view_bg, bad[0], bad[1])
+        # Keep `hole` unless the centre view contradicts it; else the nearest of inpainted
+        # value, view background and angular background that the centre view does not
+        # contradict.
         best = jnp.max(jnp.where(bad, -jnp.inf, cands), axis=0)
-        chosen = jnp.where(bad_farther & ~jnp.all(bad, axis=0), best, farther)
-        fallback = jnp.where(ok, maps, jnp.where(valid, farther, chosen))
+        chosen = jnp.where(bad_hole & ~jnp.all(bad, axis=0), best, hole)
+        fallback = jnp.where(ok, maps, jnp.where(valid, hole, chosen))
     return fallback.at[centre].set(maps[centre])
 
 
