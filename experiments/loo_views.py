@@ -47,9 +47,9 @@ SCENES = ("default", *VARIANTS)
 
 def _fmt(value) -> str:
     """A value of the grid as printed: numbers in ``g`` format, booleans and strings as they are."""
-    if isinstance(value, (bool, str)):
-        return str(value).lower() if isinstance(value, bool) else value
-    return f"{value:g}"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return value if isinstance(value, str) else f"{value:g}"
 
 
 def score_views(name: str, path: str, values: list) -> dict:
@@ -165,7 +165,7 @@ def main(argv=None) -> int:
             "path": args.path,
             "values": values,
             "criterion": args.criterion,
-            "scores": {s: {f"{_fmt(v)}": sc for v, sc in d.items()} for s, d in scores.items()},
+            "scores": {s: {_fmt(v): sc for v, sc in d.items()} for s, d in scores.items()},
             "loo": rows,
         }
         Path(args.json).write_text(json.dumps(payload, indent=1))

@@ -346,11 +346,11 @@ def _cross_hair_fill(
     else:
         view_bg = jax.vmap(background_fill)(maps, ok)
     # The value a hole takes: the view background, or the farther of it and the inpainted
-    # value (``hole_value = "farther"``).
+    # value (``hole_value = "farther"``); `inpainted` marks where that is the inpainted one.
     if config.epi.hole_value == "fill":
-        hole = view_bg
+        hole, inpainted = view_bg, jnp.zeros(maps.shape, bool)
     else:
-        hole = jnp.minimum(maps, view_bg)
+        hole, inpainted = jnp.minimum(maps, view_bg), maps <= view_bg
     fallback = jnp.where(ok, maps, hole)
     if config.epi.visibility_fill:
         # The farther of the nearest valid values of the same pixel in the views before and
@@ -362,11 +362,7 @@ def _cross_hair_fill(
         bad = jax.vmap(jax.vmap(contradicted_by_centre, (0, None, 0, None)), (0, None, None, None))(
             cands, centre_map, offsets, tol
         )
-        # `hole` is the view background or the inpainted value, pixel by pixel.
-        if config.epi.hole_value == "fill":
-            bad_hole = bad[1]
-        else:
-            bad_hole = jnp.where(maps <= view_bg, bad[0], bad[1])
+        bad_hole = jnp.where(inpainted, bad[0], bad[1])
         # Keep `hole` unless the centre view contradicts it; else the nearest of inpainted
         # value, view background and angular background that the centre view does not
         # contradict.
