@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 from typing import TYPE_CHECKING
 
 import equinox as eqx
@@ -270,16 +271,21 @@ def colour_fill(
             g = jnp.take_along_axis(guide, near[..., None], axis=axis)
             cands.append(jnp.where(found, jnp.take_along_axis(values, near, axis=axis), big))
             dists.append(jnp.where(found, jnp.sum(jnp.abs(g - guide), axis=-1), big))
-    # (4, H, W): the four candidates' values and colour distances (inf where none).
-    cands, dists = jnp.stack(cands), jnp.stack(dists)
-    # The colour-nearest candidate; among equal distances the farthest value.
-    best_dist = jnp.min(dists, axis=0)
-    best = jnp.min(jnp.where(dists == best_dist, cands, big), axis=0)
-    far = jnp.min(cands, axis=0)
+    # The four candidates' values and colour distances (inf where none) are combined
+    # pairwise, not stacked and reduced over the stack: on XLA's CPU backend that is ~1.4x
+    # faster (a 512² map: 17 against 24 ms). The colour-nearest candidate; among equal
+    # distances the farthest value.
+    best_dist = functools.reduce(jnp.minimum, dists)
+    best = functools.reduce(
+        jnp.minimum, [jnp.where(d == best_dist, c, big) for c, d in zip(cands, dists, strict=True)]
+    )
+    far = functools.reduce(jnp.minimum, cands)
     # The farthest value's colour distance: the nearest colour among the candidates within
     # `_TIE` of it, so that two (nearly) equal farthest values crossing each other do not
     # switch the comparison with the margin (copies of one value are common: filled cracks).
-    far_dist = jnp.min(jnp.where(cands <= far + _TIE, dists, big), axis=0)
+    far_dist = functools.reduce(
+        jnp.minimum, [jnp.where(c <= far + _TIE, d, big) for c, d in zip(cands, dists, strict=True)]
+    )
     pick = jnp.where(best_dist < far_dist - jnp.asarray(margin, values.dtype), best, far)
     pick = jnp.where(jnp.isfinite(pick), pick, 0.0)
     return jnp.where(valid, values, pick)
