@@ -311,6 +311,23 @@ def _photo_cost_planar(
     is within ``support_jump`` of the pixel's (`_aggregate`). ``support``: the
     aggregation's `_support_weights`, precomputed by callers that evaluate several
     candidates with the same weights (then ``support_jump`` is not used)."""
+    means = _half_plane_means(candidate, reference, planes, offsets, ssim, weights)
+    if aggregate and support is None:
+        support = _support_weights(reference, aggregate, sigma, candidate, support_jump)
+    return _aggregated_min(means, support, aggregate)
+
+
+def _aggregated_min(means: Array, support: Array | None, aggregate: int) -> Array:
+    """The cost of `_photo_cost_planar` from its `_half_plane_means` ``(4, H, W)``: each
+    half-plane's mean aggregated (`_aggregate` with ``support``), then the smallest."""
+    return jnp.min(_aggregate(means, support, aggregate), axis=0)
+
+
+def _half_plane_means(candidate, reference, planes, offsets, ssim=0.0, weights=None) -> Array:
+    """``(4, H, W)``: per pixel, the mean colour difference (`photo_cost`'s per-view cost) of
+    ``candidate`` over the views to the left, right, above and below the reference (views
+    weighted by ``weights``), ``inf`` where no view of the half-plane sees the pixel. With
+    ``ssim == 0`` a pixel's means depend on its own candidate value only."""
     ref_planes = jnp.moveaxis(reference, -1, -3)
     use_ssim = not (isinstance(ssim, int | float) and ssim == 0)
 
@@ -332,11 +349,7 @@ def _photo_cost_planar(
     m = inside.astype(costs.dtype)
     count = jnp.einsum("gk,khw->ghw", groups, m)
     total = jnp.einsum("gk,khw->ghw", groups, costs * m)
-    means = jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
-    if aggregate and support is None:
-        support = _support_weights(reference, aggregate, sigma, candidate, support_jump)
-    means = _aggregate(means, support, aggregate)
-    return jnp.min(means, axis=0)
+    return jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
 
 
 def photo_refine(
@@ -390,23 +403,29 @@ def photo_refine(
     # passes and candidates.
     support = _support_weights(reference, aggregate, sigma) if aggregate else None
 
-    def one(_, d):
+    def means(c):
+        # The choice has no gradient: the means enter comparisons only.
+        return lax.stop_gradient(_half_plane_means(c, reference, planes, offsets, 0.0, weights))
+
+    def one(_, state):
+        # A pixel's half-plane means depend on its own value only, so the means of the
+        # updated map are carried over from the candidates' (two warps per pass, not three).
+        d, m_own = state
         lo, hi = _window_extrema(d, radius)
         band = (hi - lo) > jump
-
-        def cost(c):
-            return _photo_cost_planar(
-                c, reference, planes, offsets, aggregate, sigma, weights=weights, support=support
-            )
-
-        c_own, c_hi, c_lo = cost(d), cost(hi), cost(lo)
-        best = jnp.where(c_hi <= c_lo, hi, lo)
+        m_hi, m_lo = means(hi), means(lo)
+        c_own, c_hi, c_lo = (_aggregated_min(m, support, aggregate) for m in (m_own, m_hi, m_lo))
+        high = c_hi <= c_lo
+        best = jnp.where(high, hi, lo)
         c_best = jnp.minimum(c_hi, c_lo)
         inter = jnp.minimum(hi - d, d - lo) >= between * (hi - lo)
         take = band & inter & jnp.isfinite(c_best) & (c_best + margin < c_own)
-        return jnp.where(take, best, d)
+        m_new = jnp.where(take[None], jnp.where(high[None], m_hi, m_lo), m_own)
+        return jnp.where(take, best, d), m_new
 
-    return lax.fori_loop(0, iterations, one, disparity)
+    if iterations == 0:
+        return disparity
+    return lax.fori_loop(0, iterations, one, (disparity, means(disparity)))[0]
 
 
 def photo_select(

@@ -83,6 +83,26 @@ def test_photo_refine_removes_a_foreground_halo(small_scene):
     np.testing.assert_array_equal(out[flat], halo[flat])
 
 
+def test_photo_refine_passes_equal_single_passes(small_scene):
+    # The passes carry the costs of the pixels' values over from the previous pass instead of
+    # recomputing them: the same decisions as passes that start afresh each time.
+    lf, _, _ = small_scene
+    views, offsets = cross_hair(lf)
+    halo = jnp.asarray(grey_dilation(np.asarray(lf.centre_gt), size=(5, 5)))
+    f = jax.jit(
+        lambda d, n: photo_refine(
+            d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=n
+        ),
+        static_argnums=1,
+    )
+    one = halo
+    for k in range(1, 5):
+        one = f(one, 1)
+        together = np.asarray(f(halo, k))
+        np.testing.assert_array_equal(together, np.asarray(one))
+    assert not np.array_equal(np.asarray(f(halo, 1)), together)  # later passes change pixels
+
+
 def test_photo_select_takes_the_better_map_and_keeps_fine_values(small_scene):
     """A candidate that fixes a fattened boundary but is noisy at the 0.01 level elsewhere:
     the merge takes its boundary fix and keeps the incumbent's fine values."""
