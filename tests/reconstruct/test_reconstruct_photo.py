@@ -49,30 +49,33 @@ def test_photo_cost_view_weights_in_the_half_plane_means():
     np.testing.assert_array_equal(np.asarray(ones), np.asarray(equal))
 
 
-def test_photo_refine_near_weight(small_scene):
+def _halo_refine(small_scene):
+    """The scene, its centre ground truth fattened by 2 px (edge fattening) and `photo_refine`
+    of a map against the scene's cross-hair (radius 3, jump 0.2; further keywords passed)."""
     lf, _, _ = small_scene
     views, offsets = cross_hair(lf)
     halo = jnp.asarray(grey_dilation(np.asarray(lf.centre_gt), size=(5, 5)))
-    f = jax.jit(
-        lambda d, w: photo_refine(
-            d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4, near_weight=w
-        )
-    )
-    plain = photo_refine(halo, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4)
+
+    def refine(d, **kw):
+        return photo_refine(d, lf.centre_view, views, offsets, radius=3, jump=0.2, **kw)
+
+    return lf, halo, refine
+
+
+def test_photo_refine_near_weight(small_scene):
+    _, halo, refine = _halo_refine(small_scene)
+    f = jax.jit(lambda d, w: refine(d, iterations=4, near_weight=w))
+    plain = refine(halo, iterations=4)
     np.testing.assert_array_equal(np.asarray(f(halo, 1.0)), np.asarray(plain))
     # weight 0 leaves the views one step away out of the cost: a different decision somewhere
     assert not np.array_equal(np.asarray(f(halo, 0.0)), np.asarray(plain))
 
 
 def test_photo_refine_removes_a_foreground_halo(small_scene):
-    lf, _, _ = small_scene
-    views, offsets = cross_hair(lf)
+    lf, halo, refine = _halo_refine(small_scene)
     gt = np.asarray(lf.centre_gt)
-    halo = grey_dilation(gt, size=(5, 5))  # foreground fattened by 2 px (edge fattening)
-    f = jax.jit(
-        lambda d: photo_refine(d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=4)
-    )
-    out = np.asarray(f(jnp.asarray(halo)))
+    out = np.asarray(jax.jit(lambda d: refine(d, iterations=4))(halo))
+    halo = np.asarray(halo)
     bad_in = np.mean(np.abs(halo - gt) > 0.07)
     bad_out = np.mean(np.abs(out - gt) > 0.07)
     assert bad_in > 0.05
@@ -86,15 +89,8 @@ def test_photo_refine_removes_a_foreground_halo(small_scene):
 def test_photo_refine_passes_equal_single_passes(small_scene):
     # The passes carry the costs of the pixels' values over from the previous pass instead of
     # recomputing them: the same decisions as passes that start afresh each time.
-    lf, _, _ = small_scene
-    views, offsets = cross_hair(lf)
-    halo = jnp.asarray(grey_dilation(np.asarray(lf.centre_gt), size=(5, 5)))
-    f = jax.jit(
-        lambda d, n: photo_refine(
-            d, lf.centre_view, views, offsets, radius=3, jump=0.2, iterations=n
-        ),
-        static_argnums=1,
-    )
+    _, halo, refine = _halo_refine(small_scene)
+    f = jax.jit(lambda d, n: refine(d, iterations=n), static_argnums=1)
     one = halo
     for k in range(1, 5):
         one = f(one, 1)
