@@ -91,8 +91,8 @@ def trilateral_filter(
     ``r = refine.trilateral_radius``. Points are rasterised to the centre-view pixel grid (one
     per pixel and EPI direction: of several points on one pixel, the one of the highest index)
     and the filter runs densely on the grids: a ``lax.fori_loop``
-    over the window offsets, each step a few element-wise operations on ``(2, 2, H, W)``
-    arrays. Colour distances use LAB / 100.
+    over the window rows, each step a few element-wise operations on ``(H, W)`` grids per
+    window column and pair of directions. Colour distances use LAB / 100.
 
     Returns:
         ``(N,)`` filtered disparities (unchanged for invalid points).
@@ -126,20 +126,27 @@ def trilateral_filter(
     a_c = 0.5 / config.refine.sigma_c**2
     side = 2 * r + 1
 
-    def body(k, carry):
+    def body(dy, carry):
+        # One window row per step; its columns are static slices of the row band. The terms
+        # are written out per direction pair and channel: reducing over short leading axes
+        # of stacked arrays runs several times slower on XLA's CPU backend.
         num, den = carry
-        dy, dx = k // side, k % side
-        qk = lax.dynamic_slice(q, (0, 0, dy, dx), (5, 2, H, W))
-        e = (
-            a_s * ((dy - r) ** 2 + (dx - r) ** 2).astype(dt)
-            + a_d * (p[1][:, None] - qk[1][None]) ** 2
-            + a_c * jnp.sum((p[2:][:, :, None] - qk[2:][:, None]) ** 2, axis=0)
-        )  # (2 p-directions, 2 q-directions, H, W)
-        w = qk[0][None] * jnp.exp(-e)
-        return num + jnp.sum(w * qk[1][None], axis=1), den + jnp.sum(w, axis=1)
+        band = lax.dynamic_slice(q, (0, 0, dy, 0), (5, 2, H, W + 2 * r))
+        for dx in range(side):
+            qk = band[..., dx : dx + W]
+            e_s = a_s * ((dy - r) ** 2 + (dx - r) ** 2).astype(dt)
+            for i in range(2):  # direction of the filtered point
+                w = []
+                for j in range(2):  # direction of the neighbour
+                    colour = sum((p[c, i] - qk[c, j]) ** 2 for c in (2, 3, 4))
+                    e = e_s + a_d * (p[1, i] - qk[1, j]) ** 2 + a_c * colour
+                    w.append(qk[0, j] * jnp.exp(-e))
+                num = num.at[i].add(w[0] * qk[1, 0] + w[1] * qk[1, 1])
+                den = den.at[i].add(w[0] + w[1])
+        return num, den
 
     zero = jnp.zeros((2, H, W), dt)
-    num, den = lax.fori_loop(0, side * side, body, (zero, zero))
+    num, den = lax.fori_loop(0, side, body, (zero, zero))
     # A pixel that holds a point weighs itself by exp(0) = 1, so den >= 1 there; elsewhere the
     # quotient is not used, and dividing by 1 keeps its gradient finite.
     occupied = grid[..., 0] > 0

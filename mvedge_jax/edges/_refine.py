@@ -6,7 +6,6 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from ._detect import parabola_offset
@@ -84,31 +83,33 @@ def gauss_newton_refine(
         ``(d, var)``: refined disparities and the channel-summed variance there, ``(K,)`` each.
     """
     h, W, C = epi.shape
-    a = jnp.arange(h, dtype=jnp.float32) - h // 2
-    flat = epi.reshape(h * W, C)
-    row0 = jnp.arange(h, dtype=jnp.int32) * W
+    # Channels-first with the points innermost, ``(C, h, K)``: XLA's CPU backend vectorises
+    # the arithmetic over the points (with the 3 channels innermost it runs ~7x slower).
+    a = (jnp.arange(h, dtype=jnp.float32) - h // 2)[:, None]  # (h, 1)
+    flat = jnp.transpose(epi, (2, 0, 1)).reshape(C, h * W)
+    row0 = (jnp.arange(h, dtype=jnp.int32) * W)[:, None]
 
     def sample(d):
-        g = jnp.clip(xs[:, None] - a * d[:, None], 0.0, W - 1.0)  # (K, h)
+        g = jnp.clip(xs[None, :] - a * d[None, :], 0.0, W - 1.0)  # (h, K)
         i0 = jnp.clip(jnp.floor(g), 0, W - 2).astype(jnp.int32)
-        t = (g - i0)[..., None]
-        taps = [flat[row0 + jnp.clip(i0 + k - 1, 0, W - 1)] for k in range(4)]
+        t = g - i0
+        taps = [flat[:, row0 + jnp.clip(i0 + k - 1, 0, W - 1)] for k in range(4)]
         v = sum(w * e for w, e in zip(_keys(t), taps, strict=True))
         dv = sum(w * e for w, e in zip(_keys_deriv(t), taps, strict=True))
-        return v, -a[:, None] * dv  # (K, h, C) each
+        return v, -a * dv  # (C, h, K) each
 
     def step(_, d):
         v, w = sample(d)
         vc = v - jnp.mean(v, axis=1, keepdims=True)
         wc = w - jnp.mean(w, axis=1, keepdims=True)
-        num = jnp.sum(vc * wc, axis=(1, 2))
-        den = jnp.sum(wc * wc, axis=(1, 2))
+        num = jnp.sum(vc * wc, axis=(0, 1))
+        den = jnp.sum(wc * wc, axis=(0, 1))
         delta = jnp.where(den > 1e-12, -num / jnp.maximum(den, 1e-12), 0.0)
         return d + jnp.clip(delta, -max_step, max_step)
 
     d = jax.lax.fori_loop(0, iters, step, d)
     v, _ = sample(d)
-    return d, jnp.sum(jnp.var(v, axis=1), axis=-1)
+    return d, jnp.sum(jnp.var(v, axis=1), axis=0)
 
 
 def _keys(t):
@@ -126,8 +127,10 @@ def shift_stack(
     epi: Float[Array, "h W C"], shifts: np.ndarray, *, cubic: bool = True
 ) -> Float[Array, "h W S C"]:
     """Every EPI row resampled at ``S`` static fractional shifts per row:
-    ``out[u, x, j] = epi[u](x + shifts[u, j])`` (edge-clamped), as one grouped convolution
-    whose taps are built with NumPy from the static shifts.
+    ``out[u, x, j] = epi[u](x + shifts[u, j])`` (edge-clamped), as a sum of column-shifted
+    copies of the edge-padded EPI weighted by taps built with NumPy from the static shifts
+    (only the taps some row and shift uses; a few element-wise passes, ~2.5x faster on XLA's
+    CPU backend than the equivalent grouped convolution).
 
     Args:
         epi: ``(h, W, C)``.
@@ -151,12 +154,10 @@ def shift_stack(
             for t, w in ws:
                 taps[pad + k0 + t, u, j] += w
     p = jnp.pad(epi, ((0, 0), (pad, pad), (0, 0)), mode="edge")
-    lhs = jnp.transpose(p, (2, 1, 0))  # (C, W + 2 pad, h): rows are channels
-    rhs = jnp.asarray(taps.reshape(kw, 1, h * S), epi.dtype)
-    out = lax.conv_general_dilated(
-        lhs, rhs, (1,), "VALID", dimension_numbers=("NWC", "WIO", "NWC"), feature_group_count=h
-    )  # (C, W, h * S)
-    return jnp.transpose(out.reshape(C, W, h, S), (2, 1, 3, 0))
+    out = jnp.zeros((h, W, S, C), epi.dtype)
+    for k in np.flatnonzero(np.any(taps != 0, axis=(1, 2))):
+        out = out + p[:, k : k + W, None, :] * jnp.asarray(taps[k], epi.dtype)[:, None, :, None]
+    return out
 
 
 def variance_search(
