@@ -122,12 +122,17 @@ def boundary_matte(
     mid = 0.5 * (lo + hi)
 
     r = radius
+    C = g.shape[-1]
+    # Channels as separate (H, W) planes: XLA's CPU backend runs the window loop ~25 %
+    # faster on them than on (H, W, C) arrays with the channels innermost.
+    gc = [g[..., c] for c in range(C)]
     d_p = jnp.pad(d, r, mode="edge")
-    g_p = jnp.pad(g, ((r, r), (r, r), (0, 0)), mode="edge")
+    g_p = [jnp.pad(x, r, mode="edge") for x in gc]
     p_p = jnp.pad(purity, r, mode="edge")
     zeros = jnp.zeros_like(d)
     wf = wb = df = db = zeros
-    cf = cb = jnp.zeros_like(g)
+    cf = [zeros] * C
+    cb = [zeros] * C
     # Static unrolled loop over the window offsets: XLA fuses it into one pass.
     for a in range(-r, r + 1):
         for b in range(-r, r + 1):
@@ -135,7 +140,6 @@ def boundary_matte(
                 continue
             s = float(np.exp(-(a * a + b * b) / (2.0 * spatial_sigma**2)))
             ds = d_p[r + a : r + a + H, r + b : r + b + W]
-            gs = g_p[r + a : r + a + H, r + b : r + b + W]
             w = s * p_p[r + a : r + a + H, r + b : r + b + W]
             fg = ds > mid
             # Two selections, not ``w - w_f``: a compiler may contract the difference into
@@ -145,21 +149,24 @@ def boundary_matte(
             w_b = jnp.where(fg, 0.0, w)
             wf, wb = wf + w_f, wb + w_b
             df, db = df + w_f * ds, db + w_b * ds
-            cf, cb = cf + w_f[..., None] * gs, cb + w_b[..., None] * gs
+            for c in range(C):
+                gs = g_p[c][r + a : r + a + H, r + b : r + b + W]
+                cf[c] = cf[c] + w_f * gs
+                cb[c] = cb[c] + w_b * gs
     tiny = jnp.asarray(1e-12, d.dtype)
-    F = cf / jnp.maximum(wf, tiny)[..., None]
-    B = cb / jnp.maximum(wb, tiny)[..., None]
+    F = [x / jnp.maximum(wf, tiny) for x in cf]
+    B = [x / jnp.maximum(wb, tiny) for x in cb]
     if background is not None:
-        B = jnp.where(background_valid[..., None], background, B)
-    sep = F - B
-    sep2 = jnp.sum(sep * sep, axis=-1)
-    alpha = jnp.sum((g - B) * sep, axis=-1) / jnp.maximum(sep2, tiny)
+        B = [jnp.where(background_valid, background[..., c], B[c]) for c in range(C)]
+    sep = [F[c] - B[c] for c in range(C)]
+    sep2 = sum(x * x for x in sep)
+    alpha = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep2, tiny)
     # Near-ties (alpha ~ 1/2, e.g. an edge through the centre of a pixel) keep their value,
     # so that rounding differences cannot flip a decision.
     decide = band & (wf > 0) & (wb > 0) & (sep2 > min_separation**2) & (jnp.abs(alpha - 0.5) > 1e-3)
     # Two-colour model test: the pixel's colour must lie near the line through B and F.
-    off_line = g - B - alpha[..., None] * sep
-    decide = decide & (jnp.sum(off_line * off_line, axis=-1) <= max_residual * sep2)
+    off_line = sum((gc[c] - B[c] - alpha * sep[c]) ** 2 for c in range(C))
+    decide = decide & (off_line <= max_residual * sep2)
     is_fg = d > mid
     d_f = df / jnp.maximum(wf, tiny)
     d_b = db / jnp.maximum(wb, tiny)
