@@ -60,14 +60,20 @@ def _support_weights(
     H, W = reference.shape[:2]
     r = radius
     pad = ((r, r), (r, r))
-    ref_p = jnp.pad(reference, pad + ((0, 0),), mode="edge")
+    # Per-channel (H, W) planes: a sum of channel slices, not a reduction over a short
+    # innermost axis (~1.8x slower on XLA's CPU backend).
+    channels = [reference[..., c] for c in range(reference.shape[-1])]
+    channels_p = [jnp.pad(x, pad, mode="edge") for x in channels]
     if support_jump is not None:
         disparity_p = jnp.pad(disparity, pad, mode="edge")
     planes = []
     for a in range(2 * r + 1):
         for b in range(2 * r + 1):
-            g = ref_p[a : a + H, b : b + W]
-            w = jnp.exp(-jnp.sum((g - reference) ** 2, axis=-1) / (2 * sigma * sigma))
+            dist = sum(
+                (p[a : a + H, b : b + W] - x) ** 2
+                for p, x in zip(channels_p, channels, strict=True)
+            )
+            w = jnp.exp(-dist / (2 * sigma * sigma))
             if support_jump is not None:
                 jump = jnp.abs(disparity_p[a : a + H, b : b + W] - disparity)
                 w = jnp.where(jump <= support_jump, w, 0.0)

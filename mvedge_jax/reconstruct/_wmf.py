@@ -49,9 +49,9 @@ def _block_median(
     r = radius
     k = 2 * r + 1
     rows = block + 2 * r
-    C = g_pad.shape[-1]
+    C = g_pad.shape[0]
     d = lax.dynamic_slice(d_pad, (row0, 0), (rows, width + 2 * r))
-    g = lax.dynamic_slice(g_pad, (row0, 0, 0), (rows, width + 2 * r, C))
+    g = lax.dynamic_slice(g_pad, (0, row0, 0), (C, rows, width + 2 * r))
     m = lax.dynamic_slice(inside_pad, (row0, 0), (rows, width + 2 * r))
     if slope_pad is not None:
         sx = lax.dynamic_slice(slope_pad[0], (row0, 0), (rows, width + 2 * r))
@@ -59,7 +59,7 @@ def _block_median(
 
     oy, ox = jnp.meshgrid(jnp.arange(k), jnp.arange(k), indexing="ij")
     oy, ox = oy.reshape(-1), ox.reshape(-1)
-    gc = g[r : r + block, r : r + width]  # (block, W, C) centre colours
+    gc = g[:, r : r + block, r : r + width]  # (C, block, W) centre colours, channels first
 
     def sample(a, b):  # window offset (a, b) -> disparity and weight planes (block, W)
         ds = lax.dynamic_slice(d, (a, b), (block, width))
@@ -69,17 +69,19 @@ def _block_median(
             sys_ = lax.dynamic_slice(sy, (a, b), (block, width))
             ds = ds + (r - b).astype(ds.dtype) * sxs + (r - a).astype(ds.dtype) * sys_
         ms = lax.dynamic_slice(m, (a, b), (block, width))
-        gs = lax.dynamic_slice(g, (a, b, 0), (block, width, C))
+        gs = lax.dynamic_slice(g, (0, a, b), (C, block, width))
+        # Sums of channel planes: XLA's CPU backend reduces a short innermost axis slowly.
+        csum = lambda x: sum(x[c] for c in range(C))
         if weight_type in ("cos", "jac"):
             if weight_type == "cos":
-                num = jnp.sum(gs * gc, axis=-1)
-                den = jnp.sqrt(jnp.maximum(jnp.sum(gs * gs, -1) * jnp.sum(gc * gc, -1), 1e-20))
+                num = csum(gs * gc)
+                den = jnp.sqrt(jnp.maximum(csum(gs * gs) * csum(gc * gc), 1e-20))
             else:
-                num = jnp.sum(jnp.minimum(gs, gc), axis=-1)
-                den = jnp.maximum(jnp.sum(jnp.maximum(gs, gc), axis=-1), 1e-20)
+                num = csum(jnp.minimum(gs, gc))
+                den = jnp.maximum(csum(jnp.maximum(gs, gc)), 1e-20)
             w = jnp.maximum(num / den, 0.0)
         else:
-            w = _colour_weight(jnp.sum((gs - gc) ** 2, axis=-1), sigma, weight_type)
+            w = _colour_weight(csum((gs - gc) ** 2), sigma, weight_type)
         return ds, w * ms
 
     # Window offsets first: (K, block, W); reductions over axis 0 vectorise along W.
@@ -124,7 +126,7 @@ def _wmf(
     Hp = nblocks * block_rows
     pad_rows = ((r, r + Hp - H), (r, r))
     d_pad = jnp.pad(disparity, pad_rows)
-    g_pad = jnp.pad(guide, pad_rows + ((0, 0),))
+    g_pad = jnp.pad(jnp.moveaxis(guide, -1, 0), ((0, 0),) + pad_rows)  # (C, rows, cols)
     inside = jnp.pad(mask.astype(disparity.dtype), pad_rows)
     # Two planes (x, y slopes), each sliced like the disparity.
     s_pad = None if slope is None else jnp.pad(jnp.moveaxis(slope, -1, 0), ((0, 0),) + pad_rows)

@@ -13,6 +13,22 @@ from mvedge_jax.io import read_pfm
 from mvedge_jax.reconstruct import disparity_slopes, weighted_mean_filter, weighted_median_filter
 
 
+def _weight(weight_type, g, c, sigma):
+    """OpenCV's ``WMFWeightType`` weights of window colours ``g (n, C)`` for centre ``c``."""
+    d2 = np.sum((g - c) ** 2, axis=1)
+    if weight_type == "exp":
+        return np.exp(-d2 / (2 * sigma**2))
+    if weight_type == "iv1":
+        return 1.0 / (np.sqrt(d2) + sigma)
+    if weight_type == "iv2":
+        return 1.0 / (d2 + sigma)
+    if weight_type == "cos":
+        return np.maximum(np.sum(g * c, 1) / np.sqrt(np.sum(g * g, 1) * np.sum(c * c)), 0.0)
+    if weight_type == "jac":
+        return np.sum(np.minimum(g, c), 1) / np.sum(np.maximum(g, c), 1)
+    return np.ones(len(g))
+
+
 def _brute(src, guide, r, sigma, weight_type="exp"):
     """Textbook joint weighted median (window clipped at the border)."""
     H, W = src.shape
@@ -22,15 +38,14 @@ def _brute(src, guide, r, sigma, weight_type="exp"):
             ys, xs = slice(max(0, y - r), y + r + 1), slice(max(0, x - r), x + r + 1)
             v = src[ys, xs].ravel().astype(np.float64)
             g = guide[ys, xs].reshape(v.size, -1).astype(np.float64)
-            d2 = np.sum((g - guide[y, x].reshape(1, -1)) ** 2, axis=1)
-            w = np.exp(-d2 / (2 * sigma**2)) if weight_type == "exp" else np.ones_like(v)
+            w = _weight(weight_type, g, guide[y, x].reshape(1, -1).astype(np.float64), sigma)
             o = np.argsort(v, kind="stable")
             c = np.cumsum(w[o])
             out[y, x] = v[o][np.searchsorted(c, 0.5 * c[-1])]
     return out
 
 
-@pytest.mark.parametrize("weight_type", ["exp", "off"])
+@pytest.mark.parametrize("weight_type", ["exp", "iv1", "iv2", "cos", "jac", "off"])
 def test_wmf_matches_definition(weight_type):
     rng = np.random.default_rng(3)
     src = rng.integers(0, 50, (23, 31)).astype(np.float32) / 7.0
