@@ -265,7 +265,7 @@ def colour_fill(
         raise ValueError(f"margin must be >= 0; got {margin}")
     big = jnp.asarray(jnp.inf, values.dtype)
     # The guide's channels as separate (H, W) planes: gathers and arithmetic on them run
-    # ~10 % faster on XLA's CPU backend than on (H, W, C) with the channels innermost.
+    # ~5 % faster on XLA's CPU backend than on (H, W, C) with the channels innermost.
     planes = [guide[..., c] for c in range(guide.shape[-1])]
     cands, dists = [], []
     for axis in (0, 1):
