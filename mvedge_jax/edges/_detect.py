@@ -58,8 +58,15 @@ def centre_responses(
     lhs = jnp.transpose(epis, (0, 3, 2, 1)).reshape(N * C, W, h)  # rows become in-channels
     lhs = jnp.pad(lhs, ((0, 0), (pad, pad), (0, 0)), mode="edge")
     rhs = jnp.transpose(sub, (2, 1, 0)).astype(epis.dtype)  # (Fw, h, n)
+    # Full float32 precision: a GPU would otherwise round the inputs to TensorFloat-32
+    # (10-bit mantissa) by default.
     out = lax.conv_general_dilated(
-        lhs, rhs, (1,), "VALID", dimension_numbers=("NWC", "WIO", "NWC")
+        lhs,
+        rhs,
+        (1,),
+        "VALID",
+        dimension_numbers=("NWC", "WIO", "NWC"),
+        precision=lax.Precision.HIGHEST,
     )  # (N*C, W, n)
     return jnp.transpose(out.reshape(N, C, W, n), (0, 2, 1, 3))
 

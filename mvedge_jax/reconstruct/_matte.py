@@ -355,9 +355,10 @@ def pixel_subset(where: Bool[Array, " N"], capacity: int) -> Int[Array, " K"]:
     m = -(-n // block**2) * block**2
     x = jnp.pad(where.astype(jnp.float32), (0, m - n)).reshape(m // block, block)
     tri = jnp.triu(jnp.ones((block, block), jnp.float32))
-    within = x @ tri  # inclusive running count within each block of 64 pixels
+    hi = lax.Precision.HIGHEST  # exact either way (0/1 and counts <= 64); explicit for GPUs
+    within = jnp.matmul(x, tri, precision=hi)  # inclusive running count per block of 64
     totals = within[:, -1].reshape(-1, block)
-    groups = totals @ tri  # ... of the block totals within each group of 64 blocks
+    groups = jnp.matmul(totals, tri, precision=hi)  # ... of the block totals per 64 blocks
     before_group = jnp.cumsum(groups[:, -1]) - groups[:, -1]
     before_block = (groups - totals + before_group[:, None]).ravel()
     rank = (within + before_block[:, None]).ravel()[:n].astype(jnp.int32) - 1

@@ -353,8 +353,8 @@ def _half_plane_means(candidate, reference, planes, offsets, ssim=0.0, weights=N
     if weights is not None:
         groups = groups * jnp.asarray(weights, costs.dtype)[None]
     m = inside.astype(costs.dtype)
-    count = jnp.einsum("gk,khw->ghw", groups, m)
-    total = jnp.einsum("gk,khw->ghw", groups, costs * m)
+    count = jnp.einsum("gk,khw->ghw", groups, m, precision=lax.Precision.HIGHEST)
+    total = jnp.einsum("gk,khw->ghw", groups, costs * m, precision=lax.Precision.HIGHEST)
     return jnp.where(count > 0, total / jnp.maximum(count, 1.0), jnp.inf)
 
 

@@ -131,7 +131,8 @@ def _smooth(level: Level, x: Array, r: Array, sweeps: int) -> Array:
 
 
 def _coarse_solve(h: Hierarchy, r: Array) -> Array:
-    return (h.coarse_inv @ r.reshape(-1)).reshape(h.coarse_shape)
+    x = jnp.matmul(h.coarse_inv, r.reshape(-1), precision=lax.Precision.HIGHEST)
+    return x.reshape(h.coarse_shape)
 
 
 def vcycle(h: Hierarchy, r: Float[Array, "H W"], *, nu: int = 2) -> Float[Array, "H W"]:

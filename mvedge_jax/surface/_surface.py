@@ -5,6 +5,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax import lax
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
@@ -181,7 +182,7 @@ def step_responses(
         ``(N,)`` float: positive when the disparity increases along ``+n``.
     """
     f = jnp.asarray(_PROFILE_F, disparity.dtype) / 4.5
-    return _profiles(disparity, x, y, normal) @ f
+    return jnp.matmul(_profiles(disparity, x, y, normal), f, precision=lax.Precision.HIGHEST)
 
 
 def side_score(profile: Float[Array, "N 6"], label: Float[Array, " N"]) -> Float[Array, " N"]:
@@ -199,8 +200,8 @@ def side_score(profile: Float[Array, "N 6"], label: Float[Array, " N"]) -> Float
     """
     f = jnp.asarray(_PROFILE_F, profile.dtype) / 4.5
     dev = profile - label[:, None]
-    far = jnp.abs(dev[:, :3] @ f[:3])
-    own = jnp.abs(dev[:, 3:]) @ f[3:]
+    far = jnp.abs(jnp.matmul(dev[:, :3], f[:3], precision=lax.Precision.HIGHEST))
+    own = jnp.matmul(jnp.abs(dev[:, 3:]), f[3:], precision=lax.Precision.HIGHEST)
     return far - own
 
 
@@ -271,7 +272,8 @@ def surface_vectors(
     f = jnp.asarray(_PROFILE_F, forward.dtype) / 4.5
     pf = _profiles(forward, edges.x, edges.y, normal)
     pb = _profiles(backward, edges.x, edges.y, normal)
-    rf, rb = jnp.abs(pf @ f), jnp.abs(pb @ f)
+    rf = jnp.abs(jnp.matmul(pf, f, precision=lax.Precision.HIGHEST))
+    rb = jnp.abs(jnp.matmul(pb, f, precision=lax.Precision.HIGHEST))
     # Backward profile reversed so that its label side (p - n) is at t > 0 as well.
     score_f = side_score(pf, d)
     score_b = side_score(pb[:, ::-1], d)
