@@ -44,7 +44,8 @@ from scipy.ndimage import maximum_filter, minimum_filter
 
 from mvedge_jax.lightfield import srgb_to_linear
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity
-from mvedge_jax.reconstruct import boundary_matte, sharpen
+from mvedge_jax.reconstruct import sharpen
+from mvedge_jax.reconstruct._reconstruct import _matte
 from mvedge_jax.synthetic import (
     VARIANTS,
     default_light_field,
@@ -64,22 +65,16 @@ def _scene(name: str):
     return lf, variant_surfaces(name, grid=(U, V), size=(H, W))
 
 
-def matte(d: np.ndarray, guide, sharpen_config, sigma: float | None = None) -> np.ndarray:
-    """`boundary_matte` of ``d`` with the settings of ``sharpen_config`` (a `SharpenConfig`),
-    optionally another distance scale ``sigma``."""
-    sc = sharpen_config
-    return np.asarray(
-        boundary_matte(
-            jnp.asarray(d, jnp.float32),
-            guide,
-            radius=sc.matte_radius,
-            jump=sc.matte_jump,
-            spatial_sigma=sc.matte_sigma if sigma is None else sigma,
-            impure_weight=sc.matte_impure_weight,
-            min_separation=sc.matte_min_separation,
-            max_residual=sc.matte_max_residual,
-            snap=sc.matte_snap,
+def matte(d: np.ndarray, guide, config, sigma: float | None = None) -> np.ndarray:
+    """`boundary_matte` of ``d`` as `sharpen` runs it with ``config`` (a `ReconstructConfig`),
+    optionally with another distance scale ``sigma``."""
+    if sigma is not None:
+        config = dataclasses.replace(
+            config, sharpen=dataclasses.replace(config.sharpen, matte_sigma=sigma)
         )
+    sc = config.sharpen
+    return np.asarray(
+        _matte(jnp.asarray(d, jnp.float32), guide, config, sc.matte_jump, sc.matte_snap)
     )
 
 
@@ -128,7 +123,7 @@ def score(name: str, config: PipelineConfig) -> dict:
     def share(d, where=boundary):
         return float(100 * np.mean(((d > mid) == truth)[where])) if where.any() else float("nan")
 
-    matted = matte(refined, guide, rc.sharpen)
+    matted = matte(refined, guide, rc)
     final = np.asarray(result.disparity)[u, v]
     reached, foreground = edge_geometry_sides(result.edges, result.surface, (H, W))
     reached &= boundary
@@ -136,8 +131,8 @@ def score(name: str, config: PipelineConfig) -> dict:
         "boundary_pixels": int(boundary.sum()),
         "refined": share(refined),
         "matte": share(matted),
-        "matte_sigma_0.7": share(matte(refined, guide, rc.sharpen, sigma=0.7)),
-        "gt_matte": share(matte(gt, guide, rc.sharpen)),
+        "matte_sigma_0.7": share(matte(refined, guide, rc, sigma=0.7)),
+        "gt_matte": share(matte(gt, guide, rc)),
         "final": share(final),
         "edge_geometry_n": int(reached.sum()),
         "edge_geometry": float(100 * np.mean((foreground == truth)[reached])),
