@@ -36,7 +36,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import sys
 import time
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
@@ -46,23 +48,10 @@ from mvedge_jax.lightfield import srgb_to_linear
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity
 from mvedge_jax.reconstruct import sharpen
 from mvedge_jax.reconstruct._reconstruct import _matte
-from mvedge_jax.synthetic import (
-    VARIANTS,
-    default_light_field,
-    default_surfaces,
-    render_coverage,
-    variant_scene,
-    variant_surfaces,
-)
+from mvedge_jax.synthetic import VARIANTS
 
-
-def _scene(name: str):
-    """``(light field, surfaces)`` of a scene name."""
-    if name == "default":
-        return default_light_field(), default_surfaces()
-    lf = variant_scene(name, supersample=3)
-    U, V, H, W = lf.gt_disparity.shape
-    return lf, variant_surfaces(name, grid=(U, V), size=(H, W))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from mixed_pixels import scenes  # noqa: E402
 
 
 def matte(d: np.ndarray, guide, config, sigma: float | None = None) -> np.ndarray:
@@ -101,7 +90,7 @@ def edge_geometry_sides(edges, surface, shape) -> tuple[np.ndarray, np.ndarray]:
 
 def score(name: str, config: PipelineConfig) -> dict:
     """The shares of the module doc for one scene."""
-    lf, surfaces = _scene(name)
+    ((_, lf, coverage),) = scenes([name], [3])
     U, V, H, W = lf.gt_disparity.shape
     u, v = U // 2, V // 2
     result = estimate_disparity(lf, config)
@@ -113,7 +102,7 @@ def score(name: str, config: PipelineConfig) -> dict:
     refined = np.asarray(sharpen(views, result.reconstruction.centre, refine_only))
     guide = srgb_to_linear(views[u, v])
     gt = np.asarray(lf.gt_disparity)[u, v]
-    cov = np.asarray(render_coverage(surfaces, grid=(U, V), size=(H, W), supersample=3))[u, v]
+    cov = np.asarray(coverage)[u, v]
     lo = minimum_filter(gt, 5, mode="nearest")
     hi = maximum_filter(gt, 5, mode="nearest")
     mid = 0.5 * (lo + hi)

@@ -14,7 +14,6 @@ import jax
 import jax.extend as jex
 import jax.numpy as jnp
 import numpy as np
-import pytest
 from jax import lax
 
 from mvedge_jax.diff import warp_by_depth
@@ -87,8 +86,8 @@ def test_multigrid_solve_and_its_gradient_use_full_precision_products():
     assert _low_precision(found) == []
 
 
-@pytest.mark.parametrize("dtype", [jnp.float32])
-def test_reprojection_uses_full_precision_products(dtype):
+def test_reprojection_uses_full_precision_products():
+    dtype = jnp.float32
     H, W = 12, 16
     image = jnp.zeros((H, W, 3), dtype)
     depth = jnp.full((H, W), 5.0, dtype)
