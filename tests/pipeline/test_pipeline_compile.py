@@ -49,8 +49,14 @@ def test_second_call_and_new_hyperparameters_do_not_recompile(small):
         key=jax.random.key(0),
         d_max=resolve_d_max(changed.edges, small.disparity_range),
     )
+    # The driver's stages and one jit of the whole chain are compiled separately, and XLA
+    # fuses (and so rounds) them differently; the PCG solves stop at a relative residual of
+    # 1e-5 (`SolverConfig.rtol`), so the maps agree to about that (1.03e-5 at most on an AMD
+    # EPYC host), far closer than the new hyperparameters move them (1.4).
+    change = np.abs(np.asarray(other.disparity) - np.asarray(first.disparity)).max()
+    assert change > 0.1
     np.testing.assert_allclose(
-        np.asarray(other.disparity), np.asarray(chain.disparity), rtol=0, atol=1e-5
+        np.asarray(other.disparity), np.asarray(chain.disparity), rtol=0, atol=1e-4
     )
 
 
