@@ -41,8 +41,10 @@ def test_second_call_and_new_hyperparameters_do_not_recompile(small):
     assert STAGE_CACHE.compilations == n
     assert again.compile_seconds == 0.0 and other.compile_seconds == 0.0
     np.testing.assert_array_equal(np.asarray(again.disparity), np.asarray(first.disparity))
-    # the new values are used: the result changes and equals the pure chain's
-    assert not np.allclose(np.asarray(other.disparity), np.asarray(first.disparity))
+    # the new values are used: the result changes (by up to 1.4 here) and equals the pure
+    # chain's
+    change = np.abs(np.asarray(other.disparity) - np.asarray(first.disparity)).max()
+    assert change > 0.1
     chain = jax.jit(estimate_disparity_arrays, static_argnames="d_max")(
         jnp.asarray(small.views),
         changed,
@@ -52,9 +54,7 @@ def test_second_call_and_new_hyperparameters_do_not_recompile(small):
     # The driver's stages and one jit of the whole chain are compiled separately, and XLA
     # fuses (and so rounds) them differently; the PCG solves stop at a relative residual of
     # 1e-5 (`SolverConfig.rtol`), so the maps agree to about that (1.03e-5 at most on an AMD
-    # EPYC host), far closer than the new hyperparameters move them (1.4).
-    change = np.abs(np.asarray(other.disparity) - np.asarray(first.disparity)).max()
-    assert change > 0.1
+    # EPYC host), far closer than the new hyperparameters move them.
     np.testing.assert_allclose(
         np.asarray(other.disparity), np.asarray(chain.disparity), rtol=0, atol=1e-4
     )
