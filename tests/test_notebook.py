@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import nbformat
+import pytest
 from nbclient import NotebookClient
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,6 +19,7 @@ sys.path.insert(0, str(ROOT / "notebooks"))
 import make_quickstart  # noqa: E402
 
 
+@pytest.mark.slow
 def test_quickstart_notebook_executes_and_is_written_back(data_dir, monkeypatch):
     monkeypatch.setenv("MVEDGE_DATA", str(data_dir))
     monkeypatch.delenv("MVEDGE_NOTEBOOK_SCALE", raising=False)  # the committed default

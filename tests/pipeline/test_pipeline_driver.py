@@ -121,19 +121,18 @@ def test_nan_views_are_rejected():
         estimate_disparity(bad)
 
 
+@pytest.mark.slow
 def test_backgammon_accuracy(data_dir):
-    """Regression bound on a real GT scene (thesis Ch. 6 pipeline, centre view).
-
-    Measured 2026-11-23 (first-order weighted median): MSE×100 1.295, BadPix(0.07) 1.77 (issue
-    targets 2.0 and 12).
-    """
+    """The targets of a real GT scene (thesis Ch. 6 pipeline, default config, centre view,
+    full frame): MSE×100 ≤ 1.2 and BadPix(0.07) ≤ 1.5 %. Measured on the CPU: 0.866 and
+    1.142 (docs/ACCURACY.md)."""
     lf = load_light_field(data_dir / "hci4d" / "stratified" / "backgammon")
     res = estimate_disparity(lf)
     rc, cc = lf.centre_index
     m = depth_metrics(np.asarray(res.disparity[rc, cc]), np.asarray(lf.centre_gt))
     assert res.disparity.shape == (9, 9, 512, 512)
-    assert m["badpix_0.07"] < 3.0, m
-    assert m["mse_x100"] < 2.0, m
+    assert m["badpix_0.07"] <= 1.5, m
+    assert m["mse_x100"] <= 1.2, m
     # every linear solve of the run is reported, and converged; no warning on this scene
     diag = res.diagnostics
     assert set(diag["solver"]) == {
@@ -146,22 +145,24 @@ def test_backgammon_accuracy(data_dir):
     assert diag["warnings"] == [] and diag["saturated_fraction"] == 0.0
 
 
+@pytest.mark.slow
 def test_antinous_accuracy(data_dir):
-    """Regression bound on the sparsely textured GT scene (its wall has few edge points; an
-    over-eager outlier test once raised MSE×100 to 124). The floor below the wall (rows
-    455–511 left and right of the statue's base) has no edge label; its disparity rises
-    from −1.5 to 1.7 px per view step towards the bottom, and only the photo-consistent
-    samples of `centre_seeds` tell the diffusion so. Measured 2026-11-23: MSE×100 5.59,
-    BadPix(0.07) 12.6 % (7.79 / 12.8 % without the samples); floor MSE×100 35.7 (81.8
-    without); 3699 sampled pixels, on the floor median error 0.09 and 9 % above 0.3."""
+    """The targets of the sparsely textured GT scene (default config, centre view, full
+    frame): MSE×100 ≤ 5.0 and BadPix(0.07) ≤ 10 %; measured on the CPU: 3.093 and 8.939
+    (docs/ACCURACY.md). The floor below the wall (rows 455–511 left and right of the
+    statue's base) has no edge label; its disparity rises from −1.5 to 1.7 px per view step
+    towards the bottom, and only the photo-consistent samples of `centre_seeds` tell the
+    diffusion so: they must exist there (between 1000 and 20000 sampled pixels in the view)
+    and be accurate on the floor (median error below 0.15, fewer than 15 % off by 0.3; the
+    floor's MSE×100 below 50)."""
     lf = load_light_field(data_dir / "hci4d" / "additional" / "antinous")
     res = estimate_disparity(lf)
     rc, cc = lf.centre_index
     gt = np.asarray(lf.centre_gt)
     d = np.asarray(res.disparity[rc, cc])
     m = depth_metrics(d, gt)
-    assert m["badpix_0.07"] < 14.0, m
-    assert m["mse_x100"] < 6.5, m
+    assert m["badpix_0.07"] <= 10.0, m
+    assert m["mse_x100"] <= 5.0, m
     floor = np.zeros(gt.shape, bool)
     floor[455:, :110] = True
     floor[455:, 410:] = True

@@ -44,6 +44,7 @@ def api_run():
     return lf, res, new, info, steps
 
 
+@pytest.mark.slow
 def test_optimize_returns_a_finite_result_for_every_view(api_run):
     lf, res, new, info, steps = api_run
     U, V = lf.grid
@@ -71,6 +72,7 @@ def test_optimize_returns_a_finite_result_for_every_view(api_run):
     assert new.diagnostics["solver"]["surface"] == res.diagnostics["solver"]["surface"]
 
 
+@pytest.mark.slow
 def test_optimize_merges_with_the_initial_map(api_run):
     """The propagated centre map takes, pixel by pixel, either the Ch. 6 value or the
     sharpened optimised value (`select_centre`)."""
@@ -89,6 +91,7 @@ def test_optimize_merges_with_the_initial_map(api_run):
     assert np.all(np.abs(sharp - initial)[took] > min_change - 1e-6)
 
 
+@pytest.mark.slow
 def test_residual_diffusion_starts_from_the_initial_map(api_run):
     """Without a single step, diffusing the points' departures from the Ch. 6 map gives the
     Ch. 6 map back; the thesis' diffusion of the labels themselves rebuilds it only roughly."""
@@ -108,6 +111,7 @@ def test_residual_diffusion_starts_from_the_initial_map(api_run):
     assert np.all(lab_p > 2 * res_p), (res_p, lab_p)
 
 
+@pytest.mark.slow
 def test_optimize_decreases_the_loss_and_stays_accurate(api_run):
     """Measured on this scene (2026-11-25, 3 steps of ``TINY``): loss 0.01801 → 0.01786
     (×0.992); centre MSE×100 1.302 (Ch. 6) → 1.071, worst view 1.60 → 1.33. Bounds are
@@ -127,6 +131,7 @@ def test_optimize_decreases_the_loss_and_stays_accurate(api_run):
     assert mse[(U // 2) * V + V // 2] < 1.4
 
 
+@pytest.mark.slow
 def test_write_outputs_records_the_initial_result(api_run, tmp_path):
     lf, res, new, info, _ = api_run
     writer = OutputWriter(tmp_path / "out")
@@ -148,6 +153,7 @@ def test_write_outputs_records_the_initial_result(api_run, tmp_path):
     np.testing.assert_array_equal(npz["centre_disparity_initial"], res.disparity[2, 2])
 
 
+@pytest.mark.slow
 def test_optimize_bad_input(api_run):
     lf, res, _, _, _ = api_run
     small = make_scene(3, grid=(5, 5), size=(32, 32), n_objects=1)
@@ -218,6 +224,7 @@ def cli_run(data_dir, tmp_path_factory):
 
 
 @pytest.mark.filterwarnings("ignore:up to .* points did not fit")
+@pytest.mark.slow
 def test_cli_optimize_writes_initial_and_history(cli_run):
     out, _, output = cli_run
     metrics = json.loads((out / "metrics.json").read_text())
@@ -231,6 +238,7 @@ def test_cli_optimize_writes_initial_and_history(cli_run):
     assert "before optimisation" in output and "loss" in output
 
 
+@pytest.mark.slow
 def test_cli_optimize_refuses_existing_output_without_force(cli_run):
     out, args, _ = cli_run
     res = CliRunner().invoke(main, args)

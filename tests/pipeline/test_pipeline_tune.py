@@ -52,6 +52,7 @@ def _tune_config():
     return with_values(smooth_config(), {"reconstruct.sharpen.sweep_steps": 0})
 
 
+@pytest.mark.slow
 def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     config = _tune_config()
     fields = ["reconstruct.centre.omega", "reconstruct.epi.c"]
@@ -81,6 +82,7 @@ def test_tune_lowers_the_loss_and_returns_a_pipeline_config(scenes):
     assert np.isfinite(np.asarray(result.disparity)).all()
 
 
+@pytest.mark.slow
 def test_tune_traces_the_chain_once_for_all_steps_and_calls(scenes, count_calls):
     """Every Adam step and a second `tune` call (other start values, learning rate and step
     count) reuse one compiled gradient: the chain is traced at most once."""

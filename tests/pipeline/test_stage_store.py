@@ -143,6 +143,7 @@ _PROCESS = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_a_new_process_runs_the_whole_chain_from_the_store(tmp_path):
     """This process stores the stages (in the test run's cache folder); a new process
     compiles all three from the store, without tracing, to the same result."""

@@ -68,6 +68,7 @@ def test_all_views_accuracy(small_scene, kwargs, bound, centre_bound):
     np.testing.assert_array_equal(rec.disparity[0, V // 2], rec.cross_v[0])
 
 
+@pytest.mark.slow
 def test_hyperparameter_sweep_does_not_recompile(small_scene):
     lf, edges, surface = small_scene
     traces = []
