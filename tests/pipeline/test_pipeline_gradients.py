@@ -4,11 +4,12 @@ The loss is the mean squared disparity error of every view of a small synthetic 
 against its exact ground truth, through `estimate_disparity_arrays` in float64 with the
 `smooth_config` surrogates (soft edge labels → surface vectors → centre diffusion →
 weighted-mean sharpening → cross-hair projection, EPI inpainting and off-cross-hair fill).
-One reverse-mode gradient with respect to every differentiable field at once, then two
-forward evaluations per field. The solvers run to a 1e-12 relative residual so that finite
-differences are not limited by the solver's tolerance. They pass on the CPU; on an H200 with
-deterministic kernels the chain's reverse pass is off (docs/RESULTS.md, "Deterministic kernels:
-speed and gradients"), and `experiments/chain_gradients.py` prints the comparison per field.
+One reverse-mode gradient with respect to every differentiable field at once, then the loss
+at two points per field (by the same compiled program). The solvers run to a 1e-12 relative
+residual so that finite differences are not limited by the solver's tolerance. They pass on
+the CPU; on an H200 with deterministic kernels the chain's reverse pass is off
+(docs/RESULTS.md, "Deterministic kernels: speed and gradients"), and
+`experiments/chain_gradients.py` prints the comparison per field.
 """
 
 from __future__ import annotations
