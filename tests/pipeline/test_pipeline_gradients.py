@@ -97,8 +97,8 @@ def chain(scene):
         out = estimate_disparity_arrays(views, c, key=jax.random.key(0), d_max=d_max)
         return jnp.mean((out.disparity - gt) ** 2)
 
-    # One compiled program gives the gradient and the finite differences' values (compiling a
-    # second, forward-only program of the chain would cost more than the backward passes).
+    # One compiled program gives the gradient and the finite differences' values: no second,
+    # forward-only program of the chain to compile (each value costs a backward pass more).
     value_and_grad = jax.jit(jax.value_and_grad(loss))
     value, grad = value_and_grad(values0, views, gt)
     assert np.isfinite(float(value))
