@@ -13,6 +13,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._jit import filter_jit_bound
 from ..edges import EdgeSet
 from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
@@ -601,7 +602,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
     return sharp
 
 
-@eqx.filter_jit
+@filter_jit_bound
 def sharpen(
     views: Float[ArrayLike, "U V H W 3"],
     centre_disparity: Float[ArrayLike, "H W"],
@@ -678,7 +679,7 @@ def _centre_seeds(views: Array, edges: EdgeSet, surface, config: ReconstructConf
     return jnp.where(valid, sd.weight, 0.0).astype(views.dtype), value.astype(views.dtype)
 
 
-@eqx.filter_jit
+@filter_jit_bound
 def centre_seeds(
     views: Float[ArrayLike, "U V H W 3"],
     edges: EdgeSet,
@@ -719,7 +720,7 @@ def centre_seeds(
     return _centre_seeds(views, edges, surface, config)
 
 
-@eqx.filter_jit
+@filter_jit_bound
 def select_centre(
     views: Float[ArrayLike, "U V H W 3"],
     incumbent: Float[ArrayLike, "H W"],
@@ -857,7 +858,7 @@ def _worst(residual: Array) -> Array:
     return jnp.max(lax.stop_gradient(residual))
 
 
-@eqx.filter_jit
+@filter_jit_bound
 def propagate(
     views: Float[ArrayLike, "U V H W 3"],
     centre_disparity: Float[ArrayLike, "H W"],
@@ -932,7 +933,7 @@ def propagate(
     )
 
 
-@eqx.filter_jit
+@filter_jit_bound
 def reconstruct(
     views: Float[ArrayLike, "U V H W 3"],
     edges: EdgeSet,
@@ -971,9 +972,11 @@ def reconstruct(
 
     Step 2 is `sharpen` and steps 3–6 are `propagate` (each callable on its own with any
     centre map). The centre view's output is the mean of its two inpainted versions (row and
-    column). jit-compiled (`equinox.filter_jit`); array leaves of ``config`` can be swept
-    without recompiling. Partial grids (views missing off the cross-hair are all zero): those
-    views get the plain mean of the reprojections and the background fill.
+    column). jit-compiled (`equinox.filter_jit`, the default ``config`` passed like any
+    other: a call without it runs the program of ``ReconstructConfig()``); array leaves of
+    ``config`` can be swept without recompiling. Partial grids (views missing off the
+    cross-hair are all zero): those views get the plain mean of the reprojections and the
+    background fill.
 
     Args:
         views: ``(U, V, H, W, 3)`` float RGB in [0, 1].
