@@ -125,14 +125,16 @@ def test_sweep_reuses_its_program_for_new_base_values_and_keys(small, count_call
 
 
 def test_no_stage_has_a_host_callback(small):
-    """Host callbacks would keep the stages out of the persistent cache and the stage store."""
+    """Host callbacks would keep the stages out of the persistent cache and the stage store.
+    (Lowered only: each stage takes the shapes its predecessor gives, `jax.eval_shape`.)"""
     config = PipelineConfig()
     views = jnp.asarray(small.views)
+    key = jax.random.key(0)
     edges_jit = jax.jit(edges_stage, static_argnames="d_max")
-    edges = edges_jit(views, config, key=jax.random.key(0), d_max=1.25)
-    surface = jax.jit(surface_stage)(views, edges, config)
+    edges = jax.eval_shape(lambda v, k: edges_stage(v, config, key=k, d_max=1.25), views, key)
+    surface = jax.eval_shape(lambda v, e: surface_stage(v, e, config), views, edges)
     texts = [
-        edges_jit.lower(views, config, key=jax.random.key(0), d_max=1.25).as_text(),
+        edges_jit.lower(views, config, key=key, d_max=1.25).as_text(),
         jax.jit(surface_stage).lower(views, edges, config).as_text(),
         jax.jit(reconstruct_stage).lower(views, edges, surface, config).as_text(),
     ]

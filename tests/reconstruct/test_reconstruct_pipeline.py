@@ -121,14 +121,14 @@ def test_reconstruct_bad_input(small_scene):
 
 def test_partial_grid_views_are_filled(small_scene):
     # A view missing off the cross-hair (zeros, as read_hci4d stores it) still gets a
-    # disparity map: plain mean of the reprojections and the background fill.
+    # disparity map: plain mean of the reprojections and the background fill. Measured
+    # with the default config: 1.41 (1.30 when the view is there).
     lf, edges, surface = small_scene
     views = lf.views.at[0, 0].set(0.0)
-    cfg = ReconstructConfig(sharpen=SharpenConfig(enabled=False, refine=False))
-    rec = reconstruct(views, edges, surface, cfg)
+    rec = reconstruct(views, edges, surface, ReconstructConfig())
     mse = _per_view_mse(rec, lf)
     assert np.all(np.isfinite(mse))
-    assert mse[0, 0] < 2.5, mse[0, 0]
+    assert mse[0, 0] < 1.8, mse[0, 0]
 
 
 def _sharpen_runs(small_scene):
