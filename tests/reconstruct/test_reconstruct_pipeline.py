@@ -91,23 +91,16 @@ def test_hyperparameter_sweep_does_not_recompile(small_scene):
     np.testing.assert_allclose(a, ref, atol=1e-3)
 
 
-def test_call_without_config_shares_the_compiled_program(small_scene):
+def test_call_without_config_shares_the_compiled_program(small_scene, count_calls):
     # `reconstruct` binds its default config before the jit: a call that omits it runs the
-    # program of the explicit default config (no new tracing or lowering), and equals it.
+    # program of the explicit default config (no new trace), and equals it.
+    from mvedge_jax.reconstruct import _reconstruct
+
     lf, edges, surface = small_scene
     explicit = reconstruct(lf.views, edges, surface, ReconstructConfig())
-    lowered = []
-
-    def count(event, duration, **kwargs):
-        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":  # JAX lowers a program
-            lowered.append(duration)
-
-    jax.monitoring.register_event_duration_secs_listener(count)
-    try:
-        omitted = reconstruct(lf.views, edges, surface)
-    finally:
-        jax.monitoring.unregister_event_duration_listener(count)
-    assert lowered == []
+    traces = count_calls(_reconstruct, "solve_centre")
+    omitted = reconstruct(lf.views, edges, surface)
+    assert traces == []
     np.testing.assert_array_equal(omitted.disparity, explicit.disparity)
 
 
