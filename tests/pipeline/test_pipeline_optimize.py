@@ -276,7 +276,7 @@ def _centre_before_after(folder, *configs):
 
 @pytest.mark.slow
 def test_optimize_antinous_accuracy(data_dir):
-    """Full-resolution antinous with the default schedule (~5 min on 2 cores): ``--optimize``
+    """Full-resolution antinous with the default schedule (~7 min on 2 cores): ``--optimize``
     lowers the Ch. 6 centre map's MSE×100 by at least 10 % and its BadPix(0.07) by at least
     5 %. Measured 2026-11-28: MSE×100 3.093 → 2.487 (−19.6 %), BadPix(0.07) 8.941 → 8.099
     (−9.4 %), BadPix(0.03) 27.17 → 24.79. Against the Ch. 6 map of an earlier version
@@ -291,7 +291,7 @@ def test_optimize_antinous_accuracy(data_dir):
 
 @pytest.mark.slow
 def test_optimize_backgammon_target(data_dir):
-    """Full-resolution backgammon (~6 min on 2 cores for the two runs).
+    """Full-resolution backgammon (~9 min on 2 cores for the two runs).
 
     Default (every pixel may take the optimised value, ``select.min_change = 0``): MSE×100
     at least 5 % and BadPix(0.07) lower than Ch. 6, at the price of fine accuracy.
