@@ -3,7 +3,7 @@
 Usage::
 
     python experiments/chain_gradients.py [--fields PATH,...] [--steps 1e-5,1e-6]
-        [--deterministic] [--json OUT.json]
+        [--deterministic] [--by-stage] [--json OUT.json]
 
 The test point of ``tests/pipeline/test_pipeline_gradients.py`` (loaded from that file): the
 5×5×32² synthetic light field in float64, `smooth_config` with the solvers to a 1e-12 residual,
@@ -16,6 +16,13 @@ loss = mean squared disparity error of every view. Prints, on the default JAX de
    choice taken differently by the two programs shows here;
 3. a table per field: the gradient, the central difference at each relative step, and the
    relative error of the gradient against the difference at the smallest step.
+
+With ``--by-stage`` it also computes the gradient as the chain rule over the three stages
+compiled apart (`edges_stage`, `surface_stage`, `reconstruct_stage`, each forward and
+backward its own XLA program; the stages' contributions printed one by one), and prints how
+far that gradient is from the whole program's: where the stages compiled apart give the
+central difference and the whole program does not, the error comes from how XLA compiles the
+stages together.
 
 Use it where the test file cannot run as it is (on a GPU, after a change to the chain) to see
 which fields and which outputs disagree. With ``--deterministic`` XLA's deterministic GPU
@@ -45,7 +52,102 @@ def _test_module():
     return module
 
 
-def check(fields: list[str] | None, steps: list[float]) -> dict:
+def staged_gradient(
+    run_stages, values0: dict, rel_step: float = 1e-6
+) -> tuple[dict, dict, float, list]:
+    """The loss's gradient as the chain rule over the stages compiled apart.
+
+    ``run_stages`` is ``(edges_fn, surface_fn, loss_fn)``: ``edges_fn(values) -> EdgeSet``,
+    ``surface_fn(values, edges) -> SurfaceResult``, ``loss_fn(values, edges, surface) ->
+    scalar``. Each is jitted alone, so XLA fuses nothing across a stage boundary. Only the
+    inexact (floating) leaves of the stages' outputs carry cotangents; the integer and
+    boolean leaves (indices, validity masks) are constants of the later stages.
+
+    Each stage's reverse pass is also checked alone, against central differences (relative
+    step ``rel_step``) of the stage's scalar: the loss for the reconstruction, and the dot
+    product of the stage's output with its cotangent for the surface and edge stages, per
+    field. (Not along the edge set or the surface result: the later stages round positions
+    to pixels, so the chain is smooth along the fields' directions only.)
+
+    Returns:
+        ``(gradient, contributions, loss, checks)``: the gradient per field; per stage name
+        the part of it that flows through that stage's own use of the fields; the loss value;
+        the stage checks as rows ``(stage, input, reverse pass, central difference)``, only
+        those where either is non-zero.
+    """
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    edges_fn, surface_fn, loss_fn = run_stages
+    edges = jax.jit(edges_fn)(values0)
+    e_float, e_rest = eqx.partition(edges, eqx.is_inexact_array)
+    _, vjp_e = jax.vjp(
+        jax.jit(lambda v: eqx.partition(edges_fn(v), eqx.is_inexact_array)[0]), values0
+    )
+
+    def surface_of(v, e_f):
+        return surface_fn(v, eqx.combine(e_f, e_rest))
+
+    surface = jax.jit(surface_of)(values0, e_float)
+    s_float, s_rest = eqx.partition(surface, eqx.is_inexact_array)
+    _, vjp_s = jax.vjp(
+        jax.jit(lambda v, e_f: eqx.partition(surface_of(v, e_f), eqx.is_inexact_array)[0]),
+        values0,
+        e_float,
+    )
+
+    def loss_of(v, e_f, s_f):
+        return loss_fn(v, eqx.combine(e_f, e_rest), eqx.combine(s_f, s_rest))
+
+    loss, (g_r, g_e_r, g_s) = jax.jit(jax.value_and_grad(loss_of, argnums=(0, 1, 2)))(
+        values0, e_float, s_float
+    )
+    g_s_v, g_e_s = vjp_s(g_s)
+    g_e = jax.tree_util.tree_map(lambda a, b: a + b, g_e_r, g_e_s)
+    (g_e_v,) = vjp_e(g_e)
+    contributions = {
+        "edges": {p: float(g_e_v[p]) for p in values0},
+        "surface": {p: float(g_s_v[p]) for p in values0},
+        "reconstruct": {p: float(g_r[p]) for p in values0},
+    }
+    gradient = {p: sum(c[p] for c in contributions.values()) for p in values0}
+
+    def dot(a, b):
+        return sum(
+            jnp.vdot(x, y) for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+        )
+
+    stage_scalars = {
+        "reconstruct": (jax.jit(loss_of), (values0, e_float, s_float), g_r),
+        "surface": (
+            jax.jit(
+                lambda v, e_f: dot(g_s, eqx.partition(surface_of(v, e_f), eqx.is_inexact_array)[0])
+            ),
+            (values0, e_float),
+            g_s_v,
+        ),
+        "edges": (
+            jax.jit(lambda v: dot(g_e, eqx.partition(edges_fn(v), eqx.is_inexact_array)[0])),
+            (values0,),
+            g_e_v,
+        ),
+    }
+    checks = []
+    for stage, (scalar, args, g_fields) in stage_scalars.items():
+        for path in values0:
+            h = rel_step * max(abs(float(values0[path])), 1e-2)
+            up, down = dict(values0), dict(values0)
+            up[path] = values0[path] + h
+            down[path] = values0[path] - h
+            fd = (float(scalar(up, *args[1:])) - float(scalar(down, *args[1:]))) / (2 * h)
+            ad = float(g_fields[path])
+            if ad != 0.0 or fd != 0.0:
+                checks.append((stage, path, ad, fd))
+    return gradient, contributions, float(loss), checks
+
+
+def check(fields: list[str] | None, steps: list[float], by_stage: bool = False) -> dict:
     """Run the check; returns the measurements as a JSON-ready dict."""
     import jax
     import jax.numpy as jnp
@@ -54,10 +156,13 @@ def check(fields: list[str] | None, steps: list[float]) -> dict:
     jax.config.update("jax_enable_x64", True)
     from mvedge_jax.edges import resolve_d_max
     from mvedge_jax.pipeline import (
+        edges_stage,
         estimate_disparity_arrays,
         get_path,
+        reconstruct_stage,
         replace_paths,
         smooth_config,
+        surface_stage,
     )
     from mvedge_jax.synthetic import make_scene
 
@@ -146,6 +251,45 @@ def check(fields: list[str] | None, steps: list[float]) -> dict:
         report["fields"][path] = row
         cells = " | ".join(f"{row[f'{s:g}']:.6e}" for s in steps)
         print(f"| {path} | {ad:.6e} | {cells} | {row['relative_error']:.1e} |", flush=True)
+    if by_stage:
+        key = jax.random.key(0)
+        stages = (
+            lambda v: edges_stage(views, replace_paths(config, v), key=key, d_max=d_max),
+            lambda v, e: surface_stage(views, e, replace_paths(config, v)),
+            lambda v, e, s: jnp.mean(
+                (reconstruct_stage(views, e, s, replace_paths(config, v)).disparity - gt) ** 2
+            ),
+        )
+        t0 = time.perf_counter()
+        gradient, contributions, loss, checks = staged_gradient(stages, values0, min(steps))
+        print(
+            f"\nstages compiled apart: {time.perf_counter() - t0:.1f} s (with compilation); "
+            f"loss {loss:.15g}"
+        )
+        report["by_stage"] = {"loss": loss, "gradient": gradient, "contributions": contributions}
+        print(
+            "\n| field | whole program | stages apart | edges | surface | reconstruct "
+            "| difference of the smallest step | stages apart vs difference |"
+        )
+        print("|---" * 8 + "|")
+        for path in paths:
+            fd = report["fields"][path][f"{min(steps):g}"]
+            g = gradient[path]
+            err = abs(g - fd) / max(abs(g), abs(fd), 1e-300)
+            report["by_stage"].setdefault("relative_error", {})[path] = err
+            parts = " | ".join(f"{contributions[s][path]:.6e}" for s in contributions)
+            print(
+                f"| {path} | {float(grad[path]):.6e} | {g:.6e} | {parts} | {fd:.6e} | {err:.1e} |",
+                flush=True,
+            )
+        report["by_stage"]["checks"] = [list(row) for row in checks]
+        print(
+            "\neach stage's reverse pass alone against central differences of its scalar\n"
+            "| stage | input | reverse pass | difference | relative error |\n|---|---|---|---|---|"
+        )
+        for stage, name, ad, fd in checks:
+            err = abs(ad - fd) / max(abs(ad), abs(fd), 1e-300)
+            print(f"| {stage} | {name} | {ad:.6e} | {fd:.6e} | {err:.1e} |", flush=True)
     return report
 
 
@@ -158,8 +302,15 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="request XLA's deterministic GPU kernels (no effect on the CPU)",
     )
+    parser.add_argument(
+        "--by-stage",
+        action="store_true",
+        help="also the gradient over the three stages compiled apart, per stage",
+    )
     parser.add_argument("--json", type=Path, default=None, help="write the measurements here")
     args = parser.parse_args(argv)
+    if args.json is not None and args.json.exists():
+        sys.exit(f"{args.json} exists; not overwritten")
     if args.deterministic:
         from mvedge_jax import request_deterministic_gpu
 
@@ -168,7 +319,7 @@ def main(argv: list[str] | None = None) -> None:
     steps = [float(s) for s in args.steps.split(",") if s]
     if not steps or any(s <= 0 for s in steps):
         parser.error(f"--steps needs positive relative steps, got {args.steps!r}")
-    report = check(fields, steps)
+    report = check(fields, steps, by_stage=args.by_stage)
     if args.json is not None:
         if args.json.exists():
             sys.exit(f"{args.json} exists; not overwritten")
