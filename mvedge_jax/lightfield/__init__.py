@@ -12,3 +12,4 @@ from ._ssim import ssim_map as ssim_map
 from ._warp import backward_warp as backward_warp
 from ._warp import backward_warp_planar as backward_warp_planar
 from ._warp import forward_project as forward_project
+from ._warp import forward_project_views as forward_project_views

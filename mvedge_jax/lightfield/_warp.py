@@ -5,7 +5,8 @@ Two directions:
 * `backward_warp` — pull a source view into the target view's pixel grid using the target's
   disparity (bilinear, differentiable); `backward_warp_planar` for channels-first images.
 * `forward_project` — push a source view's disparity map into another view's pixel grid
-  (nearest pixel, z-buffered; used for reprojection, view consistency and tests).
+  (nearest pixel, z-buffered; used for reprojection, view consistency and tests);
+  `forward_project_views` for many projections at once.
 """
 
 from __future__ import annotations
@@ -193,7 +194,8 @@ def forward_project(
     sides are not source-adjacent. Cracks wider than one pixel (stretch >= 2: extreme
     grazing surfaces) are not filled. Tested in ``tests/lightfield/test_lightfield_warp.py``.
 
-    ``jit``/``vmap``-able (``offset`` may be traced); the values are gathered from the input,
+    ``jit``/``vmap``-able (``offset`` may be traced; for many projections prefer
+    `forward_project_views`); the values are gathered from the input,
     so the output is differentiable w.r.t. ``disparity`` (not w.r.t. the landing positions).
 
     Args:
@@ -226,23 +228,99 @@ def forward_project(
         mask = jnp.asarray(mask)
         if mask.shape != (H, W):
             raise ValueError(f"mask must have shape {(H, W)}; got {mask.shape}")
+    _check_crack_parallax(crack_parallax)
+    dr, dc = _check_offset(offset)
+    vals, valid = _forward_project(
+        disparity[None],
+        None if mask is None else mask[None],
+        dr[None],
+        dc[None],
+        crack_parallax,
+        fill_cracks=fill_cracks,
+    )
+    return vals[0], valid[0]
+
+
+def forward_project_views(
+    disparity: Float[ArrayLike, "K H W"],
+    offsets: Float[ArrayLike, "K 2"],
+    *,
+    mask: Bool[ArrayLike, "K H W"] | None = None,
+    fill_cracks: bool = True,
+    crack_parallax: float = 0.5,
+) -> tuple[Float[Array, "K H W"], Bool[Array, "K H W"]]:
+    """`forward_project` of ``K`` maps at once: map ``k`` into the view at ``offsets[k]``.
+
+    The same values as ``jax.vmap(forward_project)`` over the maps and offsets, computed
+    with one z-buffer over all ``K`` frames (flat indices offset per frame), so the program
+    holds unbatched scatters only. Prefer it to a ``vmap`` of `forward_project`, whose
+    scatters carry batching dimensions: on a GPU with XLA's deterministic kernels
+    (`mvedge_jax.request_deterministic_gpu`) such scatters gave different pixels in two
+    compiled programs of one function (JAX 0.11.2; docs/RESULTS.md, "GPU").
+
+    Args:
+        disparity: ``(K, H, W)`` float disparity of the source view of each projection, or
+            ``(H, W)``: one map projected into every offset.
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each destination view relative to its source
+            view, in view steps.
+        mask: optional ``(K, H, W)`` (or ``(H, W)``) bool, ``True`` where the source
+            disparity is valid.
+        fill_cracks: repair 1-pixel cracks of stretched surfaces (`forward_project`).
+        crack_parallax: continuity threshold, pixels (>= 0; a float or a traced scalar).
+
+    Returns:
+        ``(projected, valid)``: ``(K, H, W)`` disparity in each destination view (0 at
+        holes) and ``(K, H, W)`` bool validity.
+
+    Raises:
+        ValueError: on a disparity that is not ``(H, W)`` or ``(K, H, W)``, offsets that are
+            not ``(K, 2)``, a mask of another shape or a negative ``crack_parallax``.
+
+    References:
+        Thesis Sec. 6.1 (reprojection with a z-buffer), eqs 6.9-6.10 (view consistency).
+    """
+    disparity = jnp.asarray(disparity)
+    offsets = jnp.asarray(offsets)
+    if offsets.ndim != 2 or offsets.shape[1] != 2:
+        raise ValueError(f"offsets must have shape (K, 2); got {offsets.shape}")
+    K = offsets.shape[0]
+    if disparity.ndim == 2:
+        disparity = jnp.broadcast_to(disparity, (K, *disparity.shape))
+    if disparity.ndim != 3 or disparity.shape[0] != K:
+        raise ValueError(
+            f"disparity must have shape (H, W) or ({K}, H, W) for {K} offsets; "
+            f"got {disparity.shape}"
+        )
+    if mask is not None:
+        mask = jnp.asarray(mask)
+        if mask.shape == disparity.shape[1:]:
+            mask = jnp.broadcast_to(mask, disparity.shape)
+        if mask.shape != disparity.shape:
+            raise ValueError(f"mask must have shape {disparity.shape}; got {mask.shape}")
+    _check_crack_parallax(crack_parallax)
+    return _forward_project(
+        disparity, mask, offsets[:, 0], offsets[:, 1], crack_parallax, fill_cracks=fill_cracks
+    )
+
+
+def _check_crack_parallax(crack_parallax) -> None:
     try:
         concrete = float(crack_parallax)
     except (TypeError, jax.errors.ConcretizationTypeError):  # traced: cannot check here
         concrete = None
     if concrete is not None and not concrete >= 0:
         raise ValueError(f"crack_parallax must be >= 0; got {crack_parallax}")
-    dr, dc = _check_offset(offset)
-    return _forward_project(disparity, mask, dr, dc, crack_parallax, fill_cracks=fill_cracks)
 
 
 @functools.partial(jax.jit, static_argnames=("fill_cracks",))
 def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bool):
-    H, W = disparity.shape
+    """``(K, H, W)`` maps, ``(K,)`` offsets; one flat z-buffer of ``K (H W + 1)`` slots
+    (each frame's last slot is its dump slot)."""
+    K, H, W = disparity.shape
     dtype = disparity.dtype if jnp.issubdtype(disparity.dtype, jnp.floating) else jnp.float32
     d = disparity.astype(dtype)
-    dr = dr.astype(dtype)
-    dc = dc.astype(dtype)
+    dr = dr.astype(dtype)[:, None, None]
+    dc = dc.astype(dtype)[:, None, None]
     ys, xs = jnp.meshgrid(jnp.arange(H, dtype=dtype), jnp.arange(W, dtype=dtype), indexing="ij")
     tx = jnp.floor(xs - dc * d + 0.5)
     ty = jnp.floor(ys - dr * d + 0.5)
@@ -252,33 +330,37 @@ def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bo
     n = H * W
     txi = jnp.where(ok, tx, 0).astype(jnp.int32)
     tyi = jnp.where(ok, ty, 0).astype(jnp.int32)
-    dest = jnp.where(ok, tyi * W + txi, n).ravel()  # n: dump slot
+    frame = (jnp.arange(K, dtype=jnp.int32) * (n + 1))[:, None, None]
+    dest = (jnp.where(ok, tyi * W + txi, n) + frame).ravel()  # n: the frame's dump slot
     dflat = jnp.where(ok, d, -jnp.inf).ravel()
-    zbuf = jnp.full((n + 1,), -jnp.inf, dtype).at[dest].max(dflat)
+    zbuf = jnp.full((K * (n + 1),), -jnp.inf, dtype).at[dest].max(dflat)
     winner = ok.ravel() & (dflat == zbuf[dest])
+    index = jnp.broadcast_to(jnp.arange(n, dtype=jnp.int32), (K, n)).ravel()
     src = (
-        jnp.full((n + 1,), -1, jnp.int32)
+        jnp.full((K * (n + 1),), -1, jnp.int32)
         .at[dest]
-        .max(jnp.where(winner, jnp.arange(n, dtype=jnp.int32), -1))[:n]
+        .max(jnp.where(winner, index, -1))
+        .reshape(K, n + 1)[:, :n]
     )
     valid = src >= 0
     safe = jnp.maximum(src, 0)
     # Gather (not the scatter result) so that gradients reach the winning source pixels.
-    vals = jnp.where(valid, d.ravel()[safe], 0.0).reshape(H, W)
-    valid = valid.reshape(H, W)
+    vals = jnp.where(valid, jnp.take_along_axis(d.reshape(K, n), safe, axis=1), 0.0)
+    vals = vals.reshape(K, H, W)
+    valid = valid.reshape(K, H, W)
     if not fill_cracks:
         return vals, valid
 
-    src = src.reshape(H, W)
+    src = src.reshape(K, H, W)
     sy, sx = src // W, src % W
     norm = jnp.sqrt(dr * dr + dc * dc)
 
     def shifted(a, oy, ox, fillv):
-        # out[y, x] = a[y + oy, x + ox], fillv outside.
-        p = jnp.pad(a, 1, constant_values=fillv)
-        return p[1 + oy : 1 + oy + H, 1 + ox : 1 + ox + W]
+        # out[k, y, x] = a[k, y + oy, x + ox], fillv outside.
+        p = jnp.pad(a, ((0, 0), (1, 1), (1, 1)), constant_values=fillv)
+        return p[:, 1 + oy : 1 + oy + H, 1 + ox : 1 + ox + W]
 
-    best = jnp.full((H, W), -jnp.inf, dtype)
+    best = jnp.full((K, H, W), -jnp.inf, dtype)
     for ey, ex in ((0, 1), (1, 0), (1, 1), (1, -1)):
         va, vb = shifted(valid, -ey, -ex, False), shifted(valid, ey, ex, False)
         da, db = shifted(vals, -ey, -ex, 0.0), shifted(vals, ey, ex, 0.0)

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ..lightfield import forward_project
+from ..lightfield import forward_project_views
 
 
 @functools.partial(jax.jit, static_argnames=("fill_cracks", "per_pixel"))
@@ -18,9 +18,7 @@ def _consistency(disparity, view_mask, target, *, fill_cracks: bool, per_pixel: 
     # Destination (target) offset relative to each source view.
     offs = jnp.stack([target[0] - rows, target[1] - cols], axis=-1).reshape(-1, 2)
     offs = offs.astype(disparity.dtype)
-    proj, valid = jax.vmap(lambda d, o: forward_project(d, o, fill_cracks=fill_cracks))(
-        disparity.reshape(-1, H, W), offs
-    )
+    proj, valid = forward_project_views(disparity.reshape(-1, H, W), offs, fill_cracks=fill_cracks)
     valid = valid & view_mask.reshape(-1, 1, 1)
     n = jnp.sum(valid, axis=0)
     nn = jnp.maximum(n, 1).astype(disparity.dtype)

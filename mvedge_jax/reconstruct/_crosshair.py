@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float
 
 from ..edges import EdgeSet
-from ..lightfield import backward_warp_planar, forward_project
+from ..lightfield import backward_warp_planar, forward_project_views
 from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 
@@ -43,12 +43,10 @@ def project_cross_hair(
     zv = jnp.zeros((V,), jnp.float32)
     zu = jnp.zeros((U,), jnp.float32)
 
-    def proj(off):
-        return forward_project(centre, off, crack_parallax=crack_parallax)
-
-    ph, vh = jax.vmap(proj)(jnp.stack([zv, dc], axis=1))
-    pv, vv = jax.vmap(proj)(jnp.stack([dr, zu], axis=1))
-    return ph, vh, pv, vv
+    # One projection of all cross-hair views: a single z-buffer over the stacked frames.
+    offsets = jnp.concatenate([jnp.stack([zv, dc], axis=1), jnp.stack([dr, zu], axis=1)])
+    p, v = forward_project_views(centre, offsets, crack_parallax=crack_parallax)
+    return p[:V], v[:V], p[V:], v[V:]
 
 
 def photometric_confidence(

@@ -340,18 +340,41 @@ def largest_jumps(
     return span > thresholds[k][:, None, None]
 
 
-def pixel_subset(where: Bool[Array, " N"], capacity: int) -> Int[Array, " K"]:
+def pixel_subset(where: Bool[Array, "*B N"], capacity: int) -> Int[Array, "*B K"]:
     """The flat indices of the first ``capacity`` pixels of ``where`` (a flattened frame),
-    in order, padded with ``N`` (an index outside the frame) to ``capacity``.
+    in order, padded with ``N`` (an index outside the frame) to ``capacity``; per frame of
+    a leading batch ``*B``.
 
-    Equal to ``jnp.nonzero(where, size=capacity, fill_value=N)``; the running count is formed
-    by two levels of 64-wide triangular matrix products (exact in float32 below 2²⁴ pixels),
-    ~1.5x faster than the cumulative sum of `jnp.nonzero` on XLA's CPU backend.
+    Equal to ``jnp.nonzero(where, size=capacity, fill_value=N)`` per frame; the running
+    count is formed by two levels of 64-wide triangular matrix products (exact in float32
+    below 2²⁴ pixels), ~1.5x faster than the cumulative sum of `jnp.nonzero` on XLA's CPU
+    backend. The frames of a batch share one unbatched scatter (rather than the batched one
+    that ``vmap`` would make: see `mvedge_jax.lightfield.forward_project_views`).
     """
+    batch, n = where.shape[:-1], where.shape[-1]
+    rows = where.reshape(-1, n)
+    b = rows.shape[0]
+    if n >= 2**24:
+        return (
+            jax.vmap(lambda w: jnp.nonzero(w, size=capacity, fill_value=n)[0])(rows)
+            .astype(jnp.int32)
+            .reshape(*batch, capacity)
+        )
+    slot = jax.vmap(lambda w: _subset_slots(w, capacity))(rows)
+    # One flat list of ``b`` frames' slots; a pixel beyond its frame's capacity is dropped.
+    flat = jnp.where(
+        slot < capacity, slot + capacity * jnp.arange(b, dtype=jnp.int32)[:, None], b * capacity
+    )
+    index = jnp.broadcast_to(jnp.arange(n, dtype=jnp.int32), (b, n))
+    out = jnp.full((b * capacity,), n, jnp.int32).at[flat.ravel()].set(index.ravel(), mode="drop")
+    return out.reshape(*batch, capacity)
+
+
+def _subset_slots(where: Bool[Array, " N"], capacity: int) -> Int[Array, " N"]:
+    """Each pixel's slot in `pixel_subset`'s list (its rank among the pixels of ``where``),
+    ``capacity`` for the pixels that are not listed."""
     n = where.size
     block = 64
-    if n >= 2**24:
-        return jnp.nonzero(where, size=capacity, fill_value=n)[0].astype(jnp.int32)
     m = -(-n // block**2) * block**2
     x = jnp.pad(where.astype(jnp.float32), (0, m - n)).reshape(m // block, block)
     tri = jnp.triu(jnp.ones((block, block), jnp.float32))
@@ -362,9 +385,7 @@ def pixel_subset(where: Bool[Array, " N"], capacity: int) -> Int[Array, " K"]:
     before_group = jnp.cumsum(groups[:, -1]) - groups[:, -1]
     before_block = (groups - totals + before_group[:, None]).ravel()
     rank = (within + before_block[:, None]).ravel()[:n].astype(jnp.int32) - 1
-    slot = jnp.where(where & (rank < capacity), rank, capacity)
-    out = jnp.full((capacity,), n, jnp.int32)
-    return out.at[slot].set(jnp.arange(n, dtype=jnp.int32), mode="drop")
+    return jnp.where(where & (rank < capacity), rank, capacity)
 
 
 def background_samples(

@@ -484,7 +484,7 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     edge = largest_jumps((hi - lo)[r_j, c_j], jump, capacity)
     # A view without an image (partial grids) has no colour to compare: no samples.
     edge = edge & present[r_j, c_j][:, None, None]
-    flat = jax.vmap(lambda m: pixel_subset(m.ravel(), capacity))(edge)
+    flat = pixel_subset(edge.reshape(edge.shape[0], -1), capacity)
     back_d = jax.vmap(lambda r, c, f: lo[r, c].ravel()[jnp.minimum(f, n - 1)])(r_j, c_j, flat)
     # All views at once: the gathers from the stacks of every view's guide and map run ~2x
     # slower inside a `lax.map` on XLA's CPU backend.

@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from mvedge_jax.lightfield import backward_warp, backward_warp_planar, forward_project
+from mvedge_jax.lightfield import (
+    backward_warp,
+    backward_warp_planar,
+    forward_project,
+    forward_project_views,
+)
 
 H, W = 24, 32
 
@@ -248,3 +255,43 @@ def test_forward_project_traced_crack_parallax():
     f = jax.jit(lambda t: forward_project(d, (0.0, 4.0), crack_parallax=t)[1].sum())
     assert int(f(0.5)) == 40 * 64  # all cracks filled
     assert int(f(0.0)) < 40 * 64 - 300  # threshold 0: nothing is continuous enough
+
+
+@pytest.mark.parametrize("fill_cracks", [True, False])
+def test_forward_project_views_is_each_projection(key, fill_cracks):
+    """The stacked projection equals `forward_project` of every map alone, bit for bit: per
+    map (with its mask) and one shared map into several views, slanted surfaces, depth steps
+    and pixels leaving the frame included."""
+    k1, k2, k3 = jax.random.split(key, 3)
+    ys, xs = _grid()
+    plane = 0.4 + 0.06 * (jnp.asarray(xs) - W / 2)
+    step = jnp.where(jnp.asarray(xs) > W / 2, 1.5, -0.5)
+    noise = jax.random.uniform(k1, (H, W), minval=-1.0, maxval=1.0)
+    maps = jnp.stack([plane, step, noise, plane + step])
+    offsets = jnp.array([[0.0, 2.0], [-1.0, 0.0], [1.0, -2.0], [2.0, 1.0]])
+    mask = jax.random.uniform(k2, maps.shape) > 0.1
+    p, v = jax.jit(functools.partial(forward_project_views, fill_cracks=fill_cracks))(
+        maps, offsets, mask=mask
+    )
+    for i in range(4):
+        pi, vi = forward_project(maps[i], offsets[i], mask=mask[i], fill_cracks=fill_cracks)
+        np.testing.assert_array_equal(p[i], pi)
+        np.testing.assert_array_equal(v[i], vi)
+    assert int(jnp.sum(~v)) > 0 and int(jnp.sum(v)) > 0
+    shared = jax.random.uniform(k3, (H, W), minval=-1.5, maxval=1.5)
+    p, v = forward_project_views(shared, offsets, fill_cracks=fill_cracks, crack_parallax=0.7)
+    for i in range(4):
+        pi, vi = forward_project(shared, offsets[i], fill_cracks=fill_cracks, crack_parallax=0.7)
+        np.testing.assert_array_equal(p[i], pi)
+        np.testing.assert_array_equal(v[i], vi)
+
+
+def test_forward_project_views_bad_inputs():
+    with pytest.raises(ValueError, match=r"\(K, 2\)"):
+        forward_project_views(np.zeros((H, W)), np.zeros((3,)))
+    with pytest.raises(ValueError, match=r"\(3, H, W\)"):
+        forward_project_views(np.zeros((2, H, W)), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="mask"):
+        forward_project_views(np.zeros((3, H, W)), np.zeros((3, 2)), mask=np.ones((2, H, W), bool))
+    with pytest.raises(ValueError, match="crack_parallax"):
+        forward_project_views(np.zeros((H, W)), np.zeros((3, 2)), crack_parallax=-0.5)

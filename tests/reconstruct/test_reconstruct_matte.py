@@ -358,6 +358,18 @@ def test_pixel_subset_is_the_first_pixels_of_the_mask(n, capacity, fraction):
     )
 
 
+def test_pixel_subset_of_a_batch_is_each_frames_subset():
+    """Frames of a batch (one almost empty, one over capacity) get each frame's own list."""
+    rng = np.random.default_rng(3)
+    where = jnp.asarray(rng.random((2, 3, 500)) < np.array([0.02, 0.5, 0.95])[:, None])
+    out = np.asarray(jax.jit(pixel_subset, static_argnums=1)(where, 200))
+    assert out.shape == (2, 3, 200)
+    for b in range(2):
+        for f in range(3):
+            expected = jnp.nonzero(where[b, f], size=200, fill_value=500)[0]
+            np.testing.assert_array_equal(out[b, f], expected)
+
+
 def test_largest_jumps_keeps_the_list_for_the_largest_jumps():
     """Three maps of 20×20 pixels in 2×2 blocks (so that counting every other row and column
     is exact), jump 0.5, a list of 40: the first has 24 pixels above 0.5 (all kept); the

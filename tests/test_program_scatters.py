@@ -1,0 +1,52 @@
+"""The chain's forward program holds no batched scatters.
+
+``vmap`` of a scatter (``x.at[i].max(v)`` inside a vmapped function) gives a scatter with
+batching dimensions. On a GPU with XLA's deterministic kernels
+(`mvedge_jax.request_deterministic_gpu`) such scatters of the cross-hair projection gave
+different pixels in the forward and the gradient programs of one function (JAX 0.11.2,
+docs/RESULTS.md "GPU"); the chain's stacked scatters use flat indices instead
+(`forward_project_views`, `pixel_subset`). The CPU gives the same numbers either way, so
+these tests read the traced programs (jaxprs).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.extend as jex
+import jax.numpy as jnp
+
+from mvedge_jax.pipeline import PipelineConfig, estimate_disparity_arrays, smooth_config
+
+
+def _batched_scatters(jaxpr) -> list[str]:
+    """Name and source line of every scatter with batching dimensions in ``jaxpr`` and in
+    the programs nested in its equations."""
+    found = []
+    for eqn in jaxpr.eqns:
+        if eqn.primitive.name.startswith("scatter"):
+            if eqn.params["dimension_numbers"].operand_batching_dims:
+                found.append(f"{eqn.primitive.name} at {eqn.source_info.traceback}")
+        for sub in jex.core.jaxprs_in_params(eqn.params):
+            found.extend(_batched_scatters(sub))
+    return found
+
+
+def test_the_scan_sees_a_vmapped_scatter():
+    def splat(i, v):
+        return jnp.zeros(4).at[i].max(v)
+
+    i, v = jnp.zeros((3, 5), jnp.int32), jnp.ones((3, 5))
+    assert len(_batched_scatters(jax.make_jaxpr(jax.vmap(splat))(i, v).jaxpr)) == 1
+    assert _batched_scatters(jax.make_jaxpr(splat)(i[0], v[0]).jaxpr) == []
+
+
+def test_whole_chain_has_no_batched_scatters():
+    views = jnp.zeros((5, 5, 24, 32, 3), jnp.float32)
+    for config in (PipelineConfig(), smooth_config()):
+
+        def chain(v, config=config):
+            return estimate_disparity_arrays(
+                v, config, key=jax.random.PRNGKey(0), d_max=2.0
+            ).disparity
+
+        assert _batched_scatters(jax.make_jaxpr(chain)(views).jaxpr) == []
