@@ -52,6 +52,27 @@ def _test_module():
     return module
 
 
+def gradient_test_point() -> tuple:
+    """The gradient tests' test point, in float64 (call after enabling ``jax_enable_x64``):
+    ``(views, gt, config, d_max, values0, tests)``: the 5×5×32² synthetic light field and its
+    ground truth, the configuration (`smooth_config`, solvers to 1e-12), the filter bank's
+    ``d_max``, the differentiable fields' values and the test module."""
+    import jax.numpy as jnp
+
+    from mvedge_jax.edges import resolve_d_max
+    from mvedge_jax.pipeline import get_path, smooth_config
+    from mvedge_jax.synthetic import make_scene
+
+    tests = _test_module()
+    lf = make_scene(3, grid=(5, 5), size=(32, 32), disparity_range=(-1.0, 1.0), n_objects=3)
+    views = jnp.asarray(lf.views, jnp.float64)
+    gt = jnp.asarray(lf.gt_disparity, jnp.float64)
+    config = tests._tight(smooth_config())
+    d_max = resolve_d_max(config.edges, lf.disparity_range)
+    values0 = {p: jnp.asarray(get_path(config, p), jnp.float64) for p in tests.SMOOTH_PATHS}
+    return views, gt, config, d_max, values0, tests
+
+
 def staged_gradient(
     run_stages, values0: dict, rel_step: float = 1e-6
 ) -> tuple[dict, dict, float, list]:
@@ -154,29 +175,19 @@ def check(fields: list[str] | None, steps: list[float], by_stage: bool = False) 
     import numpy as np
 
     jax.config.update("jax_enable_x64", True)
-    from mvedge_jax.edges import resolve_d_max
     from mvedge_jax.pipeline import (
         edges_stage,
         estimate_disparity_arrays,
-        get_path,
         reconstruct_stage,
         replace_paths,
-        smooth_config,
         surface_stage,
     )
-    from mvedge_jax.synthetic import make_scene
 
-    tests = _test_module()
+    views, gt, config, d_max, values0, tests = gradient_test_point()
     paths = list(tests.SMOOTH_PATHS) if not fields else fields
     unknown = sorted(set(paths) - set(tests.SMOOTH_PATHS))
     if unknown:
         raise ValueError(f"not differentiable fields of the chain: {unknown}")
-    lf = make_scene(3, grid=(5, 5), size=(32, 32), disparity_range=(-1.0, 1.0), n_objects=3)
-    views = jnp.asarray(lf.views, jnp.float64)
-    gt = jnp.asarray(lf.gt_disparity, jnp.float64)
-    config = tests._tight(smooth_config())
-    d_max = resolve_d_max(config.edges, lf.disparity_range)
-    values0 = {p: jnp.asarray(get_path(config, p), jnp.float64) for p in tests.SMOOTH_PATHS}
 
     def run(values):
         c = replace_paths(config, values)

@@ -24,12 +24,10 @@ from __future__ import annotations
 import argparse
 import collections
 import functools
-import importlib.util
+import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-TEST_FILE = ROOT / "tests" / "pipeline" / "test_pipeline_gradients.py"
 #: The steps of `mvedge_jax.reconstruct._reconstruct` whose outputs are recorded.
 STEPS = (
     "colour_guide",
@@ -83,18 +81,10 @@ def main(argv: list[str] | None = None) -> None:
 
     jax.config.update("jax_enable_x64", True)
     import mvedge_jax.reconstruct._reconstruct as rec
-    from mvedge_jax.edges import resolve_d_max
-    from mvedge_jax.pipeline import (
-        estimate_disparity_arrays,
-        get_path,
-        replace_paths,
-        smooth_config,
-    )
-    from mvedge_jax.synthetic import make_scene
+    from mvedge_jax.pipeline import estimate_disparity_arrays, replace_paths
 
-    spec = importlib.util.spec_from_file_location("chain_gradient_tests", TEST_FILE)
-    tests = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tests)
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from chain_gradients import gradient_test_point
 
     records: dict = collections.defaultdict(list)  # (program, tap) -> recorded calls
     program = ["forward"]
@@ -126,12 +116,7 @@ def main(argv: list[str] | None = None) -> None:
         setattr(rec, name, tapped(name, fn))
     rec._propagate = propagate_tapped
     try:
-        lf = make_scene(3, grid=(5, 5), size=(32, 32), disparity_range=(-1.0, 1.0), n_objects=3)
-        views = jnp.asarray(lf.views, jnp.float64)
-        gt = jnp.asarray(lf.gt_disparity, jnp.float64)
-        config = tests._tight(smooth_config())
-        d_max = resolve_d_max(config.edges, lf.disparity_range)
-        values0 = {p: jnp.asarray(get_path(config, p), jnp.float64) for p in tests.SMOOTH_PATHS}
+        views, gt, config, d_max, values0, _ = gradient_test_point()
 
         def loss(values):
             c = replace_paths(config, values)
