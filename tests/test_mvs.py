@@ -25,6 +25,7 @@ from mvedge_jax.diff import (
     relative_pose,
     warp_by_depth,
 )
+from mvedge_jax.diff._multiview import _multiview_occlusion_masks
 from mvedge_jax.io import read_colmap_model, read_pfm
 from mvedge_jax.metrics import scale_fit_metrics
 from mvedge_jax.mvs import MVSConfig, estimate_depth_mvs, load_mvs_input, run_mvs
@@ -165,6 +166,12 @@ def test_multiview_loss_prefers_the_true_depth(scene):
     mask = eqx.filter_jit(multiview_occlusion_mask)
     m = np.asarray(mask(label, cams, 1, scene.images.shape[1:3]))
     assert 0.5 < m.mean() < 0.99
+    # the loss takes every source's mask from one stacked z-buffer: the same bits
+    every = _multiview_occlusion_masks(
+        label, cams, jnp.arange(len(srcs), dtype=jnp.int32), scene.images.shape[1:3], 0.25
+    )
+    for i in range(len(srcs)):
+        np.testing.assert_array_equal(every[i], mask(label, cams, i, scene.images.shape[1:3]))
 
 
 def test_bad_multiview_input(scene, project, tmp_path):

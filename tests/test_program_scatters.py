@@ -5,7 +5,8 @@ batching dimensions. On a GPU with XLA's deterministic kernels
 (`mvedge_jax.request_deterministic_gpu`) such scatters of the cross-hair projection gave
 different pixels in the forward and the gradient programs of one function (JAX 0.11.2,
 docs/RESULTS.md "GPU"); the chain's stacked scatters use flat indices instead
-(`forward_project_views`, `pixel_subset`). The CPU gives the same numbers either way, so
+(`forward_project_views`, `pixel_subset`), and so do the occlusion masks of the
+self-supervised losses (thesis eq 7.15). The CPU gives the same numbers either way, so
 these tests read the traced programs (jaxprs).
 """
 
@@ -15,7 +16,9 @@ import jax
 import jax.extend as jex
 import jax.numpy as jnp
 
+from mvedge_jax.diff import multiview_cameras, multiview_photometric_terms, photometric_terms
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity_arrays, smooth_config
+from mvedge_jax.synthetic import make_multiview_scene
 
 
 def _batched_scatters(jaxpr) -> list[str]:
@@ -50,3 +53,27 @@ def test_whole_chain_has_no_batched_scatters():
             ).disparity
 
         assert _batched_scatters(jax.make_jaxpr(chain)(views).jaxpr) == []
+
+
+def test_photometric_losses_have_no_batched_scatters():
+    """The occlusion masks of eq 7.15 (a z-buffer per view) in both losses' programs."""
+    d = jnp.zeros((16, 20))
+    views = jnp.zeros((4, 16, 20, 3))
+    offsets = jnp.array([[0.0, 1.0], [1.0, 0.0], [0.0, -1.0], [-1.0, 0.0]])
+
+    def light_field(x):
+        return photometric_terms(x, views[0], views, offsets)["photometric"]
+
+    assert _batched_scatters(jax.make_jaxpr(light_field)(d).jaxpr) == []
+    scene = make_multiview_scene(n_views=3)
+    ref = scene.names[1]
+    cameras = multiview_cameras(scene.model, ref, [n for n in scene.names if n != ref])
+    images = jnp.asarray(scene.images)
+    label = cameras.label(jnp.asarray(scene.depth[1], jnp.float32))
+
+    def multiview(x):
+        return multiview_photometric_terms(x, images[1], images[jnp.array([0, 2])], cameras)[
+            "photometric"
+        ]
+
+    assert _batched_scatters(jax.make_jaxpr(multiview)(label).jaxpr) == []

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._fields import check_fields, hyperparameter
-from ..lightfield import backward_warp, forward_project, ssim_dissimilarity
+from ..lightfield import backward_warp, forward_project_views, ssim_dissimilarity
 
 
 class LossConfig(eqx.Module):
@@ -88,19 +88,31 @@ def occlusion_mask(
     References:
         Thesis eq 7.15 (binary occlusion mask recomputed at every iteration).
     """
-    d = jax.lax.stop_gradient(jnp.asarray(disparity))
-    offset = jnp.asarray(offset, d.dtype)
+    d = jnp.asarray(disparity)
+    return _occlusion_masks(d, jnp.asarray(offset, d.dtype)[None], tolerance)[0]
+
+
+def _occlusion_masks(d: Array, offsets: Array, tolerance) -> Array:
+    """`occlusion_mask` for ``K`` offsets ``(K, 2)`` at once: ``(K, H, W)``. One stacked
+    z-buffer (`forward_project_views`), so the program holds no batched scatter."""
+    d = jax.lax.stop_gradient(d)
     H, W = d.shape
-    proj, ok = forward_project(d, offset)
+    proj, ok = forward_project_views(d, offsets)
     zb = jnp.where(ok, proj, -1e4)
-    # nearest-pixel lookup of the z-buffer at the landing position
-    ys, xs = jnp.meshgrid(jnp.arange(H, dtype=d.dtype), jnp.arange(W, dtype=d.dtype), indexing="ij")
-    lx = xs - offset[1] * d
-    ly = ys - offset[0] * d
-    inside = (lx > -0.5) & (lx < W - 0.5) & (ly > -0.5) & (ly < H - 0.5)
-    xi = jnp.clip(jnp.floor(lx + 0.5), 0, W - 1).astype(jnp.int32)
-    yi = jnp.clip(jnp.floor(ly + 0.5), 0, H - 1).astype(jnp.int32)
-    return inside & (d >= zb[yi, xi] - jnp.asarray(tolerance, d.dtype))
+
+    def visible(zb_k, offset):
+        # nearest-pixel lookup of the z-buffer at the landing position
+        ys, xs = jnp.meshgrid(
+            jnp.arange(H, dtype=d.dtype), jnp.arange(W, dtype=d.dtype), indexing="ij"
+        )
+        lx = xs - offset[1] * d
+        ly = ys - offset[0] * d
+        inside = (lx > -0.5) & (lx < W - 0.5) & (ly > -0.5) & (ly < H - 0.5)
+        xi = jnp.clip(jnp.floor(lx + 0.5), 0, W - 1).astype(jnp.int32)
+        yi = jnp.clip(jnp.floor(ly + 0.5), 0, H - 1).astype(jnp.int32)
+        return inside & (d >= zb_k[yi, xi] - jnp.asarray(tolerance, d.dtype))
+
+    return jax.vmap(visible)(zb, offsets)
 
 
 def _grad_abs(e: Array) -> Array:
@@ -161,12 +173,12 @@ def photometric_terms(
     offsets = jnp.asarray(offsets, d.dtype)
     _check_views(d, centre, others, offsets)
 
-    def per_view(view, off):
-        warped = backward_warp(view, d, off)
-        m = occlusion_mask(d, off, tolerance=config.occlusion_tolerance).astype(d.dtype)
-        return masked_view_errors(centre, warped, m)
+    masks = _occlusion_masks(d, offsets, config.occlusion_tolerance).astype(d.dtype)
 
-    return combine_view_errors(*jax.vmap(per_view)(others, offsets), d, centre, config)
+    def per_view(view, off, m):
+        return masked_view_errors(centre, backward_warp(view, d, off), m)
+
+    return combine_view_errors(*jax.vmap(per_view)(others, offsets, masks), d, centre, config)
 
 
 def masked_view_errors(

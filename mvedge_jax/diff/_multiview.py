@@ -379,26 +379,43 @@ def multiview_occlusion_mask(
     References:
         Thesis eq 7.15 (binary occlusion mask recomputed at every iteration).
     """
-    d = jax.lax.stop_gradient(jnp.asarray(label))
+    d = jnp.asarray(label)
+    indices = jnp.asarray(index, jnp.int32)[None]
+    return _multiview_occlusion_masks(d, cameras, indices, source_shape, tolerance)[0]
+
+
+def _multiview_occlusion_masks(d, cameras: MultiViewCameras, indices, source_shape, tolerance):
+    """`multiview_occlusion_mask` of the source views ``indices`` ``(K,)`` at once:
+    ``(K, H, W)``. One z-buffer over the K stacked source frames (flat indices), so the
+    program holds no batched scatter (see `mvedge_jax.lightfield.forward_project_views`)."""
+    d = jax.lax.stop_gradient(d)
     H2, W2 = source_shape
-    sx, sy, z = _reproject(
-        cameras.depth(d),
-        cameras.k_reference,
-        cameras.k_source[index],
-        cameras.rotation[index],
-        cameras.translation[index],
-    )
-    inside = (z > 0) & (sx > -0.5) & (sx < W2 - 0.5) & (sy > -0.5) & (sy < H2 - 0.5)
-    ls = cameras.scale.astype(d.dtype) / jnp.where(z > 0, z, 1.0)
-    xi = jnp.clip(jnp.floor(sx + 0.5), 0, W2 - 1).astype(jnp.int32)
-    yi = jnp.clip(jnp.floor(sy + 0.5), 0, H2 - 1).astype(jnp.int32)
-    flat = jnp.where(inside, yi * W2 + xi, H2 * W2).ravel()
+    n = H2 * W2
+    depth = cameras.depth(d)
+
+    def landing(i):
+        sx, sy, z = _reproject(
+            depth,
+            cameras.k_reference,
+            cameras.k_source[i],
+            cameras.rotation[i],
+            cameras.translation[i],
+        )
+        inside = (z > 0) & (sx > -0.5) & (sx < W2 - 0.5) & (sy > -0.5) & (sy < H2 - 0.5)
+        ls = cameras.scale.astype(d.dtype) / jnp.where(z > 0, z, 1.0)
+        xi = jnp.clip(jnp.floor(sx + 0.5), 0, W2 - 1).astype(jnp.int32)
+        yi = jnp.clip(jnp.floor(sy + 0.5), 0, H2 - 1).astype(jnp.int32)
+        return inside, ls, jnp.where(inside, yi * W2 + xi, n)
+
+    inside, ls, flat = jax.vmap(landing)(indices)
+    # Each source frame's slots, and its last slot for the pixels that land outside.
+    flat = flat + (jnp.arange(indices.shape[0], dtype=jnp.int32) * (n + 1))[:, None, None]
     zb = (
-        jnp.full(H2 * W2 + 1, -jnp.inf, d.dtype)
-        .at[flat]
+        jnp.full(indices.shape[0] * (n + 1), -jnp.inf, d.dtype)
+        .at[flat.ravel()]
         .max(jnp.where(inside, ls, -jnp.inf).ravel())
     )
-    return inside & (ls >= zb[flat].reshape(ls.shape) - jnp.asarray(tolerance, d.dtype))
+    return inside & (ls >= zb[flat] - jnp.asarray(tolerance, d.dtype))
 
 
 def multiview_photometric_terms(
@@ -442,8 +459,11 @@ def multiview_photometric_terms(
     if srcs.ndim != 4 or srcs.shape[0] != S or srcs.shape[-1] != 3:
         raise ValueError(f"sources must have shape ({S}, H2, W2, 3); got {tuple(srcs.shape)}")
     depth = cameras.depth(d)
+    visible = _multiview_occlusion_masks(
+        d, cameras, jnp.arange(S, dtype=jnp.int32), srcs.shape[1:3], config.occlusion_tolerance
+    ).astype(d.dtype)
 
-    def per_view(view, i):
+    def per_view(view, i, m):
         warped, inside = warp_by_depth(
             view,
             depth,
@@ -452,12 +472,9 @@ def multiview_photometric_terms(
             cameras.rotation[i],
             cameras.translation[i],
         )
-        m = inside * multiview_occlusion_mask(
-            d, cameras, i, view.shape[:2], tolerance=config.occlusion_tolerance
-        ).astype(d.dtype)
-        return masked_view_errors(ref, warped, m)
+        return masked_view_errors(ref, warped, inside * m)
 
-    return combine_view_errors(*jax.vmap(per_view)(srcs, jnp.arange(S)), d, ref, config)
+    return combine_view_errors(*jax.vmap(per_view)(srcs, jnp.arange(S), visible), d, ref, config)
 
 
 def multiview_loss(

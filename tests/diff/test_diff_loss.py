@@ -17,6 +17,7 @@ from mvedge_jax.diff import (
     ssim_map,
     supervised_loss,
 )
+from mvedge_jax.diff._loss import _occlusion_masks
 from mvedge_jax.synthetic import make_scene
 
 
@@ -44,6 +45,16 @@ def test_occlusion_mask_of_a_near_square():
     # constant disparity: only the strip that leaves the image is invalid
     m2 = np.asarray(occlusion_mask(jnp.full((10, 10), 2.0), jnp.array([1.0, 0.0])))
     assert not m2[:2].any() and m2[2:].all()
+
+
+def test_occlusion_masks_of_all_views_are_each_views_mask(scene):
+    """`photometric_terms` takes the masks of all views from one stacked z-buffer; they are
+    `occlusion_mask` of each view, bit for bit."""
+    _, _, offsets, gt = scene
+    masks = _occlusion_masks(gt, offsets, 0.25)
+    for k in range(offsets.shape[0]):
+        np.testing.assert_array_equal(masks[k], occlusion_mask(gt, offsets[k], tolerance=0.25))
+    assert 0 < int(jnp.sum(~masks)) < masks.size
 
 
 def test_ground_truth_has_lower_warping_error_than_wrong_disparity(scene):
