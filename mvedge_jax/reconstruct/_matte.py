@@ -348,8 +348,9 @@ def pixel_subset(where: Bool[Array, "*B N"], capacity: int) -> Int[Array, "*B K"
     Equal to ``jnp.nonzero(where, size=capacity, fill_value=N)`` per frame; the running
     count is formed by two levels of 64-wide triangular matrix products (exact in float32
     below 2²⁴ pixels), ~1.5x faster than the cumulative sum of `jnp.nonzero` on XLA's CPU
-    backend. The frames of a batch share one unbatched scatter (rather than the batched one
-    that ``vmap`` would make: see `mvedge_jax.lightfield.forward_project_views`).
+    backend. Below 2²⁴ pixels per frame the frames of a batch share one unbatched scatter
+    (rather than the batched one that ``vmap`` would make: see
+    `mvedge_jax.lightfield.forward_project_views`).
     """
     batch, n = where.shape[:-1], where.shape[-1]
     rows = where.reshape(-1, n)
