@@ -17,6 +17,7 @@ import jax.extend as jex
 import jax.numpy as jnp
 
 from mvedge_jax.diff import multiview_cameras, multiview_photometric_terms, photometric_terms
+from mvedge_jax.lightfield import forward_project_views
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity_arrays, smooth_config
 from mvedge_jax.synthetic import make_multiview_scene
 
@@ -77,3 +78,15 @@ def test_photometric_losses_have_no_batched_scatters():
         ]
 
     assert _batched_scatters(jax.make_jaxpr(multiview)(label).jaxpr) == []
+
+
+def test_stacked_projection_and_its_gradient_have_no_batched_scatters():
+    """`forward_project_views` gathers the winners' values through flat indices, so the
+    scatter-add of its reverse pass is unbatched too."""
+    d = jnp.zeros((3, 12, 16))
+    offsets = jnp.array([[0.0, 1.0], [1.0, 0.0], [-1.0, 2.0]])
+
+    def total(x):
+        return jnp.sum(forward_project_views(x, offsets)[0])
+
+    assert _batched_scatters(jax.make_jaxpr(jax.grad(total))(d).jaxpr) == []

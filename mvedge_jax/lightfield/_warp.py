@@ -344,8 +344,10 @@ def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bo
     )
     valid = src >= 0
     safe = jnp.maximum(src, 0)
-    # Gather (not the scatter result) so that gradients reach the winning source pixels.
-    vals = jnp.where(valid, jnp.take_along_axis(d.reshape(K, n), safe, axis=1), 0.0)
+    # Gather (not the scatter result) so that gradients reach the winning source pixels; flat
+    # indices, so that the gradient's scatter-add is unbatched too.
+    first = (jnp.arange(K, dtype=jnp.int32) * n)[:, None]
+    vals = jnp.where(valid, d.ravel()[(safe + first).ravel()].reshape(K, n), 0.0)
     vals = vals.reshape(K, H, W)
     valid = valid.reshape(K, H, W)
     if not fill_cracks:
