@@ -101,21 +101,18 @@ def staged_gradient(
     import jax.numpy as jnp
 
     edges_fn, surface_fn, loss_fn = run_stages
-    edges = jax.jit(edges_fn)(values0)
-    e_float, e_rest = eqx.partition(edges, eqx.is_inexact_array)
-    _, vjp_e = jax.vjp(
-        jax.jit(lambda v: eqx.partition(edges_fn(v), eqx.is_inexact_array)[0]), values0
-    )
+
+    def split(tree):
+        return eqx.partition(tree, eqx.is_inexact_array)
+
+    # Each stage runs once: its floating outputs are the primal of its VJP, the rest is aux.
+    e_float, vjp_e, e_rest = jax.vjp(jax.jit(lambda v: split(edges_fn(v))), values0, has_aux=True)
 
     def surface_of(v, e_f):
         return surface_fn(v, eqx.combine(e_f, e_rest))
 
-    surface = jax.jit(surface_of)(values0, e_float)
-    s_float, s_rest = eqx.partition(surface, eqx.is_inexact_array)
-    _, vjp_s = jax.vjp(
-        jax.jit(lambda v, e_f: eqx.partition(surface_of(v, e_f), eqx.is_inexact_array)[0]),
-        values0,
-        e_float,
+    s_float, vjp_s, s_rest = jax.vjp(
+        jax.jit(lambda v, e_f: split(surface_of(v, e_f))), values0, e_float, has_aux=True
     )
 
     def loss_of(v, e_f, s_f):
@@ -142,14 +139,12 @@ def staged_gradient(
     stage_scalars = {
         "reconstruct": (jax.jit(loss_of), (values0, e_float, s_float), g_r),
         "surface": (
-            jax.jit(
-                lambda v, e_f: dot(g_s, eqx.partition(surface_of(v, e_f), eqx.is_inexact_array)[0])
-            ),
+            jax.jit(lambda v, e_f: dot(g_s, split(surface_of(v, e_f))[0])),
             (values0, e_float),
             g_s_v,
         ),
         "edges": (
-            jax.jit(lambda v: dot(g_e, eqx.partition(edges_fn(v), eqx.is_inexact_array)[0])),
+            jax.jit(lambda v: dot(g_e, split(edges_fn(v))[0])),
             (values0,),
             g_e_v,
         ),
