@@ -71,7 +71,11 @@ def test_sweep_equals_separate_runs(small):
     config = PipelineConfig()
     d_max = resolve_d_max(config.edges, small.disparity_range)
     centres = sweep(
-        small.views, config, {"reconstruct.centre.omega": OMEGAS}, key=jax.random.key(0), d_max=d_max
+        small.views,
+        config,
+        {"reconstruct.centre.omega": OMEGAS},
+        key=jax.random.key(0),
+        d_max=d_max,
     )
     assert centres.shape == (3, 32, 32)
     for i, w in enumerate(OMEGAS):
