@@ -102,8 +102,12 @@ def test_jit_matches_eager(key):
 
 def test_kernels_grad(x64):
     d = jnp.array([0.3, -1.7, 2.2])
-    check_grads(lambda d: label_kernel_1d(d, 1.3, 3), (d,), order=1, modes=("rev",), eps=1e-6)
-    check_grads(lambda r: weight_kernel(r, 0.71, 2), (d**2,), order=1, modes=("rev",), eps=1e-6)
+    check_grads(
+        jax.jit(lambda d: label_kernel_1d(d, 1.3, 3)), (d,), order=1, modes=("rev",), eps=1e-6
+    )
+    check_grads(
+        jax.jit(lambda r: weight_kernel(r, 0.71, 2)), (d**2,), order=1, modes=("rev",), eps=1e-6
+    )
 
 
 def test_splat_grad(x64):
@@ -116,4 +120,4 @@ def test_splat_grad(x64):
         s = splat(pos, lab, R, (12, 12))
         return jnp.sum(wts[0] * s.label_sum + wts[1] * s.density + wts[2] * s.weight)
 
-    check_grads(f, (pos, lab, R), order=1, modes=("rev",), eps=1e-6)
+    check_grads(jax.jit(f), (pos, lab, R), order=1, modes=("rev",), eps=1e-6)

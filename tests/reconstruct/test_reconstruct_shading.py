@@ -99,7 +99,7 @@ def test_shading_bias_gradient_matches_finite_differences(small_scene, x64):
     def f(v, ref, d):
         return shading_bias(d, ref, v, offs, sigma=3.0, threshold=10.0, floor=0.0, jump=10.0)
 
-    check_grads(f, (v, ref, d), order=1, modes=("rev",), eps=1e-6)
+    check_grads(jax.jit(f), (v, ref, d), order=1, modes=("rev",), eps=1e-6)
 
 
 def test_shading_bias_bad_input(small_scene):

@@ -166,7 +166,7 @@ def test_gradient_of_lambda_e_wrt_labels(x64):
         return surface_vectors(es, jnp.asarray(img), cfg).step_response.sum()
 
     d0 = jnp.linspace(0.5, 1.0, 8)
-    check_grads(f, (d0,), order=1, modes=("rev",), eps=1e-6, atol=1e-4, rtol=1e-3)
+    check_grads(jax.jit(f), (d0,), order=1, modes=("rev",), eps=1e-6, atol=1e-4, rtol=1e-3)
 
 
 def test_side_score_prefers_label_consistent_step():
