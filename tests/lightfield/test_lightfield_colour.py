@@ -58,8 +58,8 @@ def test_gradients_float64(x64, key):
     rgb = np.asarray(0.1 + 0.8 * jax.random.uniform(key, (6, 3), dtype=jnp.float64))
     dark = np.array([[0.01, 0.02, 0.03]], np.float64)
     f = jax.jit(rgb_to_lab)
-    check_grads(jax.jit(f), (rgb,), order=1, modes=("rev",), eps=1e-6)
-    check_grads(jax.jit(f), (dark,), order=1, modes=("rev",), eps=1e-6)
+    check_grads(f, (rgb,), order=1, modes=("rev",), eps=1e-6)
+    check_grads(f, (dark,), order=1, modes=("rev",), eps=1e-6)
     assert f(rgb).dtype == jnp.float64
     g = jax.jit(jax.grad(lambda x: rgb_to_lab(x).sum()))(np.zeros((2, 3)))
     assert np.isfinite(np.asarray(g)).all()  # black has finite gradients
@@ -83,6 +83,6 @@ def test_srgb_transfer_gradients_float64(x64, key):
     rgb = np.asarray(0.1 + 0.8 * jax.random.uniform(key, (4, 3), dtype=jnp.float64))
     dark = np.array([[0.001, 0.02, 0.03]], np.float64)
     for f in (jax.jit(srgb_to_linear), jax.jit(linear_to_srgb)):
-        check_grads(jax.jit(f), (rgb,), order=1, modes=("rev",), eps=1e-6)
-        check_grads(jax.jit(f), (dark,), order=1, modes=("rev",), eps=1e-7)
+        check_grads(f, (rgb,), order=1, modes=("rev",), eps=1e-6)
+        check_grads(f, (dark,), order=1, modes=("rev",), eps=1e-7)
         assert f(rgb).dtype == jnp.float64
