@@ -2,6 +2,7 @@
 
 Usage:
     python experiments/error_split.py [SCENE ...] [--cache DIR] [--json OUT.json]
+    python experiments/error_split.py [SCENE ...] --components [--json OUT.json]
 
 SCENE: ``backgammon``, ``antinous`` (full resolution from ``$MVEDGE_DATA``), ``default`` (the
 synthetic default scene) or a synthetic variant (``textureless``, ``slanted``, ``thin``,
@@ -41,11 +42,17 @@ show what those steps add or remove; where ``GT +sharpen`` is about as high as a
 ``+sharpen`` row, or higher, the sharpening, not its input, sets that score. Also printed:
 the share of visible edge points whose label is off by more than 0.07 (and 0.3) from the GT
 on their side.
+
+``--components``: instead, the ground-truth centre map through `sharpen` with every
+component on, each one off and each one alone (photo-consistent snapping, boundary matte,
+plane sweep, weighted median): which step sets the floor of ``GT +sharpen``. Rows: MSE×100
+of the frame and of the ``edge`` region, BadPix(0.07) of the frame.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import pickle
@@ -71,6 +78,7 @@ from mvedge_jax.metrics import depth_metrics  # noqa: E402
 from mvedge_jax.pipeline import PipelineConfig, estimate_disparity  # noqa: E402
 from mvedge_jax.reconstruct import (  # noqa: E402
     ReconstructConfig,
+    SharpenConfig,
     centre_disparity,
     centre_seeds,
     sharpen,
@@ -220,6 +228,53 @@ def split_scene(lf, config: PipelineConfig, cache: Path | None) -> dict:
     return {"scene": lf.name, "rows": rows, "region_share_%": share, "labels": stats}
 
 
+#: The sharpening's components: name → (field of `SharpenConfig`, its value when off).
+COMPONENTS = {
+    "snapping": ("refine", False),
+    "matte": ("matte", False),
+    "plane sweep": ("sweep_steps", 0),
+    "weighted median": ("enabled", False),
+}
+
+
+def component_configs(config: SharpenConfig) -> dict[str, SharpenConfig]:
+    """``config`` as given (``"all on"``), with each component of `COMPONENTS` off
+    (``"<name> off"``) and with each one alone (``"<name> alone"``, the others off)."""
+    on = {field: getattr(config, field) for field, _ in COMPONENTS.values()}
+    off = dict(COMPONENTS.values())
+    out = {"all on": config}
+    for name, (field, value) in COMPONENTS.items():
+        out[f"{name} off"] = dataclasses.replace(config, **{field: value})
+    for name, (field, _) in COMPONENTS.items():
+        out[f"{name} alone"] = dataclasses.replace(config, **{**off, field: on[field]})
+    return out
+
+
+def component_split(lf, config: PipelineConfig) -> dict:
+    """Rows ``{setting: {"all", "edge": MSE×100, "bp07": BadPix(0.07)}}`` of the scene's
+    ground-truth centre map sharpened with each `component_configs` setting."""
+    rc, cc = lf.centre_index
+    gt = np.asarray(lf.gt_disparity[rc, cc])
+    edge = regions(gt, np.asarray(lf.centre_view))["edge"]
+    rows = {}
+    for name, sc in component_configs(config.reconstruct.sharpen).items():
+        rcfg = dataclasses.replace(config.reconstruct, sharpen=sc)
+        m = np.asarray(sharpen(lf.views, jnp.asarray(gt), rcfg))
+        rows[name] = {
+            "all": depth_metrics(m, gt)["mse_x100"],
+            "edge": depth_metrics(m, gt, edge)["mse_x100"],
+            "bp07": depth_metrics(m, gt)["badpix_0.07"],
+        }
+    return {"scene": lf.name, "components": rows}
+
+
+def print_components(res: dict) -> None:
+    print(f"{res['scene']}: ground truth sharpened (MSE×100 all / edge, BadPix(0.07) all)")
+    for name, row in res["components"].items():
+        print(f"  {name:<22}{row['all']:>9.3f}{row['edge']:>9.3f}{row['bp07']:>8.2f}")
+    sys.stdout.flush()
+
+
 def print_table(results: list[dict]) -> None:
     head = f"{'scene':<22}{'stage':<22}" + "".join(f"{r:>12}" for r in REGIONS) + f"{'BP.07':>8}"
     print("MSE×100 of the centre view by region (share of pixels in brackets); BadPix(0.07) all")
@@ -249,7 +304,14 @@ def main(argv=None) -> int:
     ap.add_argument("scenes", nargs="*", help=f"scenes among {', '.join(SCENES)} (default: all)")
     ap.add_argument("--cache", help="folder for the pipeline results per scene (reused)")
     ap.add_argument("--json", help="write the results as JSON")
+    ap.add_argument(
+        "--components",
+        action="store_true",
+        help="sharpen the ground truth with each component off and alone instead",
+    )
     args = ap.parse_args(argv)
+    if args.components and args.cache:
+        ap.error("--cache holds the pipeline's results, which --components does not use")
     unknown = set(args.scenes) - set(SCENES)
     if unknown:
         ap.error(f"unknown scenes {sorted(unknown)}; use {', '.join(SCENES)}")
@@ -258,10 +320,14 @@ def main(argv=None) -> int:
     results = []
     for name in args.scenes or SCENES:
         t0 = time.perf_counter()
-        res = split_scene(load_scene(name), config, cache)
+        if args.components:
+            res = component_split(load_scene(name), config)
+            print_components(res)
+        else:
+            res = split_scene(load_scene(name), config, cache)
+            print_table([res])
         res["seconds"] = time.perf_counter() - t0
         results.append(res)
-        print_table([res])
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=2) + "\n")
     return 0
