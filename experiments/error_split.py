@@ -260,10 +260,11 @@ def component_split(lf, config: PipelineConfig) -> dict:
     for name, sc in component_configs(config.reconstruct.sharpen).items():
         rcfg = dataclasses.replace(config.reconstruct, sharpen=sc)
         m = np.asarray(sharpen(lf.views, jnp.asarray(gt), rcfg))
+        frame = depth_metrics(m, gt)
         rows[name] = {
-            "all": depth_metrics(m, gt)["mse_x100"],
+            "all": frame["mse_x100"],
             "edge": depth_metrics(m, gt, edge)["mse_x100"],
-            "bp07": depth_metrics(m, gt)["badpix_0.07"],
+            "bp07": frame["badpix_0.07"],
         }
     return {"scene": lf.name, "components": rows}
 
