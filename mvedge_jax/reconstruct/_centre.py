@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 from jaxtyping import Array, ArrayLike, Float
 
 from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab, srgb_to_linear
 from ..solve import SolveResult, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
-from ._photo import _block_upsample
+from ._photo import _block_upsample, _window_extrema
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..surface import SurfaceResult
@@ -37,6 +39,7 @@ def splat_bilinear(
     value: Float[Array, " N"],
     weight: Float[Array, " N"],
     shape: tuple[int, int],
+    corner_scale: Callable[[Array, Array], Array] | None = None,
 ) -> tuple[Float[Array, "H W"], Float[Array, "H W"]]:
     """Bilinear splat of weighted labels onto a pixel grid.
 
@@ -45,6 +48,9 @@ def splat_bilinear(
     ``Σ_i Σ_k w_i b_ik (D_k − v_i)²`` equals, up to a constant, ``Σ_k λ_k (D_k − S_k)²`` with
     ``λ_k = Σ_i w_i b_ik`` and ``S_k = Σ_i w_i b_ik v_i / λ_k`` — the two returned maps.
     Points (or corners) outside the grid are dropped; zero weight marks padding.
+    ``corner_scale(col, row)``, given the ``(N,)`` int32 column and row of one corner of every
+    point (clipped into the grid), returns ``(N,)`` factors of that corner's coefficient
+    (`splat_mask`).
 
     Returns:
         ``(data_weight (H, W), target (H, W))``; ``target`` is 0 where ``data_weight`` is 0.
@@ -67,6 +73,8 @@ def splat_bilinear(
         xi = x0 + ox
         yi = y0 + oy
         inside = (xi >= 0) & (xi < W) & (yi >= 0) & (yi < H)
+        if corner_scale is not None:
+            b = b * corner_scale(jnp.clip(xi, 0, W - 1), jnp.clip(yi, 0, H - 1))
         wb = jnp.where(inside, weight * b, 0.0)
         yi = jnp.where(inside, yi, H)  # out of bounds -> dropped
         lam = lam.at[yi, xi].add(wb, mode="drop")
@@ -123,6 +131,76 @@ def label_positions(
     return qx, qy, edges.valid & edges.visible
 
 
+#: Distance (pixels) from an edge point, along its surface vector ``n``, of the pixel whose
+#: colour stands for the point's own surface (``p + 2n``) and of the pixel across the edge
+#: (``p − 2n``) in `splat_mask`.
+SIDE_DISTANCE = 2.0
+
+
+def _side_pixel(edges: EdgeSet, offset: Array, distance: float, k: int, shape) -> tuple:
+    """``(row, col)`` int32 ``(N,)``: the pixel of the ``k×`` grid nearest to
+    ``p + distance · n``."""
+    Hk, Wk = shape
+    sx = k * (edges.x + distance * offset[:, 0]) + 0.5 * (k - 1)
+    sy = k * (edges.y + distance * offset[:, 1]) + 0.5 * (k - 1)
+    row = jnp.clip(jnp.round(sy).astype(jnp.int32), 0, Hk - 1)
+    col = jnp.clip(jnp.round(sx).astype(jnp.int32), 0, Wk - 1)
+    return row, col
+
+
+def uniform_window(guide: Float[Array, "H W C"]) -> Float[Array, "H W"]:
+    """Largest colour difference (Euclidean over the channels, guide units) between two
+    4-neighbours of which one lies in the pixel's 3×3 window: small on a uniform region."""
+    dx = jnp.sqrt(jnp.sum(jnp.square(guide[:, 1:] - guide[:, :-1]), axis=-1))
+    dy = jnp.sqrt(jnp.sum(jnp.square(guide[1:] - guide[:-1]), axis=-1))
+    g = jnp.zeros(guide.shape[:2], dx.dtype)
+    g = g.at[:, 1:].max(dx).at[:, :-1].max(dx).at[1:].max(dy).at[:-1].max(dy)
+    return _window_extrema(g, 1)[1]
+
+
+def splat_mask(
+    guide: Float[Array, "H W C"],
+    edges: EdgeSet,
+    offset: Float[Array, "N 2"],
+    config: ReconstructConfig,
+    k: int = 1,
+) -> Callable[[Array, Array], Array]:
+    """The ``corner_scale`` of `splat_bilinear` for the centre diffusion: a label keeps its
+    splat off a uniform region across its edge.
+
+    Where the pixel ``p − 2n`` across point ``p``'s edge (``n`` its surface vector) lies on a
+    uniform region (`uniform_window` below ``centre.splat_uniform``), a splat corner whose
+    colour differs from the point's own surface (the guide at ``p + 2n``) by more than
+    ``centre.splat_colour`` (Euclidean, guide units) gets no weight: a uniform region has
+    no label of its own, so a label that lands on it sets its whole disparity. Elsewhere
+    the coefficients stay bilinear. ``centre.splat_uniform = 0`` turns the test off.
+    Not in the thesis (docs/ACCURACY.md, "Splat off uniform regions").
+
+    Args:
+        guide: ``(H, W, C)`` colour guide on the solve grid (``k×`` the centre view).
+        edges: `EdgeSet` (centre-view positions).
+        offset: ``(N, 2)`` surface vectors.
+        config: `ReconstructConfig` (``centre.splat_uniform``, ``centre.splat_colour``).
+        k: the solve grid's factor (``centre.upsample``).
+
+    Returns:
+        ``corner_scale(col, row) -> (N,)`` factors in ``{0, 1}`` (piecewise constant: no
+        gradient).
+    """
+    shape = guide.shape[:2]
+    offset = jnp.asarray(offset)
+    own = lax.stop_gradient(guide[_side_pixel(edges, offset, SIDE_DISTANCE, k, shape)])
+    across = _side_pixel(edges, offset, -SIDE_DISTANCE, k, shape)
+    uniform = lax.stop_gradient(uniform_window(guide))[across] < config.centre.splat_uniform
+    limit = jnp.square(config.centre.splat_colour)
+
+    def corner_scale(col: Array, row: Array) -> Array:
+        far = jnp.sum(jnp.square(lax.stop_gradient(guide[row, col]) - own), axis=-1) > limit
+        return jnp.where(uniform & far, 0.0, 1.0).astype(guide.dtype)
+
+    return corner_scale
+
+
 def centre_problem(
     edges: EdgeSet,
     surface: SurfaceResult,
@@ -147,7 +225,8 @@ def centre_problem(
         conf = _upsample2(conf)
         qx = 2.0 * qx + 0.5
         qy = 2.0 * qy + 0.5
-    lam, target = splat_bilinear(qx, qy, edges.disparity, w, (k * H, k * W))
+    mask = splat_mask(guide, edges, surface.offset, config, k)
+    lam, target = splat_bilinear(qx, qy, edges.disparity, w, (k * H, k * W), mask)
     if seeds is not None:
         seed_weight, seed_value = (jnp.asarray(a, lam.dtype) for a in seeds)
         seed_weight = _block_upsample(seed_weight, k, (k * H, k * W))
@@ -205,7 +284,9 @@ def centre_disparity(
     Every valid edge point visible in the centre view is splatted (bilinearly, sub-pixel) at
     ``p + centre.offset_scale · n`` — ``n`` its surface vector, pointing to the surface its
     label belongs to — with data weight ``ω · exp(a · λ_e)`` (eq 6.3; ``λ_e`` the step response of
-    the bidirectional diffusion). Smoothness between 4-neighbours is
+    the bidirectional diffusion); next to a uniform region across its edge, its splat
+    corners of another colour than its own surface get no weight (`splat_mask`; not in the
+    thesis). Smoothness between 4-neighbours is
     ``c / ((|∇I| + ε)(1 + β · conf))``: weak across colour edges and across likely depth edges
     (``conf`` the depth-edge confidence map of Sec. 4.3). The screened-Poisson problem is solved
     with `solve_poisson` (PCG to ``config.centre.solver.rtol``), optionally on a 2× grid and

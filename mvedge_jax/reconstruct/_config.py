@@ -35,11 +35,16 @@ class CentreConfig(eqx.Module):
             ``ReconstructConfig.colour_space``).
         conf_beta: depth-edge confidence attenuation: smoothness across an edge is divided by
             ``1 + conf_beta · conf`` (``conf`` the larger confidence of the two pixels).
+        splat_uniform: (threshold) a label's splat is tested where the pixel 2 px across
+            its edge lies on a region whose neighbouring colours differ by less than this
+            (guide units; `uniform_window`); 0 turns the test off (`splat_mask`).
+        splat_colour: (threshold) there, a splat corner whose colour differs from the
+            label's own surface by more than this (Euclidean, guide units) gets no weight.
         upsample: (static) solve the centre problem on an ``upsample×`` grid (1 or 2) and
             average back (sub-pixel label placement).
         solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
 
-    The array fields are all differentiable.
+    The array fields are differentiable except the two thresholds.
 
     Raises:
         TypeError, ValueError: on construction, for a value of the wrong type or out of
@@ -56,6 +61,8 @@ class CentreConfig(eqx.Module):
     c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
     eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
     conf_beta: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
+    splat_uniform: Array = hyperparameter(0.02, differentiable=False, lower=0.0)
+    splat_colour: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
     upsample: int = static(1, lower=1, upper=2)
     solver: SolverConfig = SolverConfig()
 

@@ -19,6 +19,7 @@ from mvedge_jax.reconstruct import (
     SharpenConfig,
     centre_disparity,
 )
+from mvedge_jax.reconstruct._centre import centre_problem, uniform_window
 from mvedge_jax.solve import SolverConfig
 
 
@@ -110,6 +111,79 @@ def test_depth_edge_confidence_blocks_leakage():
         out[beta] = float(jnp.mean(jnp.abs(dd - truth)))
     assert out[1000.0] < 0.05, out
     assert out[0.0] > 0.3, out
+
+
+def _panel_on_floor(floor_noise: float):
+    """A uniform yellow panel (columns 0–19, disparity 1.2) on a tan floor (columns 20–39,
+    disparity −1; Gaussian noise of ``floor_noise`` on it). The panel's boundary labels sit
+    0.4 px inside the floor (their splat at ``p + n`` puts 0.4 of each label on column 20);
+    the floor's only labels are at its right border."""
+    H, W, split = 12, 40, 19
+    img = np.empty((H, W, 3), np.float32)
+    img[:, : split + 1] = [0.85, 0.75, 0.2]
+    rng = np.random.default_rng(1)
+    img[:, split + 1 :] = [0.7, 0.55, 0.4] + floor_noise * rng.normal(size=(H, W - split - 1, 3))
+    img = img.clip(0, 1)
+    ys = np.tile(np.arange(H, dtype=np.float32), 2)
+    xs = np.concatenate([np.full(H, split + 1.4), np.full(H, W - 1.0)]).astype(np.float32)
+    d = np.concatenate([np.full(H, 1.2), np.full(H, -1.0)]).astype(np.float32)
+    n = 2 * H
+    off = np.zeros((n, 2), np.float32)
+    off[:, 0] = -1.0  # both point left: the panel's labels into the panel, the floor's into it
+    edges = EdgeSet(
+        x=jnp.asarray(xs),
+        y=jnp.asarray(ys),
+        disparity=jnp.asarray(d),
+        confidence=jnp.ones(n),
+        visible=jnp.ones(n, bool),
+        lab=jnp.zeros((n, 3)),
+        direction=jnp.zeros(n, jnp.int32),
+        intercepts=jnp.zeros((n, 2)),
+        valid=jnp.ones(n, bool),
+        n_dropped=jnp.zeros((), jnp.int32),
+    )
+    surface = OracleSurface(jnp.asarray(off), jnp.ones(n), jnp.zeros((H, W)))
+    truth = np.where(np.arange(W)[None] <= split, 1.2, -1.0) * np.ones((H, 1))
+    return img, edges, surface, truth, split
+
+
+def test_labels_keep_their_splat_off_a_uniform_region_across_the_edge():
+    img, edges, surface, truth, split = _panel_on_floor(0.0)
+    off = ReconstructConfig(centre=CentreConfig(splat_uniform=0.0))
+    on = ReconstructConfig()
+    lam_off = np.asarray(centre_problem(edges, surface, jnp.asarray(img), off)[0])
+    lam_on = np.asarray(centre_problem(edges, surface, jnp.asarray(img), on)[0])
+    # The floor column next to the panel loses the panel's weight, the panel keeps its own.
+    assert np.all(lam_off[:, split + 1] > 0) and np.all(lam_on[:, split + 1] == 0)
+    np.testing.assert_array_equal(lam_on[:, split], lam_off[:, split])
+    floor = np.s_[:, split + 1 :]
+    err = {}
+    for name, cfg in (("off", off), ("on", on)):
+        d = np.asarray(centre_disparity(edges, surface, img, cfg))
+        err[name] = float(np.mean(np.abs(d - truth)[floor]))
+        assert np.mean(np.abs(d - truth)[:, : split + 1]) < 0.05, (name, d[0])
+    # Without the test the floor, which has no label near the panel, follows the stray
+    # labels; with it, its own.
+    assert err["on"] < 0.05 and err["off"] > 0.3, err
+
+
+def test_splat_stays_bilinear_next_to_a_textured_region():
+    img, edges, surface, _, _ = _panel_on_floor(0.1)
+    assert float(uniform_window(jnp.asarray(img))[0, 25]) > 0.1
+    lam = [
+        np.asarray(centre_problem(edges, surface, jnp.asarray(img), cfg)[0])
+        for cfg in (ReconstructConfig(centre=CentreConfig(splat_uniform=0.0)), ReconstructConfig())
+    ]
+    np.testing.assert_array_equal(lam[0], lam[1])
+
+
+def test_uniform_window():
+    img = np.full((6, 7, 3), 0.5, np.float32)
+    img[:, 4:] = 0.8  # a step between columns 3 and 4
+    g = np.asarray(uniform_window(jnp.asarray(img)))
+    step = np.sqrt(3 * 0.3**2)
+    np.testing.assert_allclose(g[:, 2:6], step, rtol=1e-6)  # 3×3 windows touching the step
+    assert np.all(g[:, :2] == 0) and np.all(g[:, 6:] == 0)
 
 
 def test_centre_gradients_wrt_hyperparameters(x64):
