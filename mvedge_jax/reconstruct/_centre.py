@@ -151,11 +151,14 @@ def _side_pixel(edges: EdgeSet, offset: Array, distance: float, k: int, shape) -
 def uniform_window(guide: Float[Array, "H W C"]) -> Float[Array, "H W"]:
     """Largest colour difference (Euclidean over the channels, guide units) between two
     4-neighbours of which one lies in the pixel's 3×3 window: small on a uniform region."""
-    dx = jnp.sqrt(jnp.sum(jnp.square(guide[:, 1:] - guide[:, :-1]), axis=-1))
-    dy = jnp.sqrt(jnp.sum(jnp.square(guide[1:] - guide[:-1]), axis=-1))
-    g = jnp.zeros(guide.shape[:2], dx.dtype)
-    g = g.at[:, 1:].max(dx).at[:, :-1].max(dx).at[1:].max(dy).at[:-1].max(dy)
-    return _window_extrema(g, 1)[1]
+    planes = [guide[..., c] for c in range(guide.shape[-1])]  # see `backward_warp_planar`
+    dx = jnp.sqrt(sum(jnp.square(p[:, 1:] - p[:, :-1]) for p in planes))
+    dy = jnp.sqrt(sum(jnp.square(p[1:] - p[:-1]) for p in planes))
+    zx = jnp.zeros_like(dx[:, :1])
+    zy = jnp.zeros_like(dy[:1])
+    gx = jnp.maximum(jnp.concatenate([zx, dx], axis=1), jnp.concatenate([dx, zx], axis=1))
+    gy = jnp.maximum(jnp.concatenate([zy, dy], axis=0), jnp.concatenate([dy, zy], axis=0))
+    return _window_extrema(jnp.maximum(gx, gy), 1)[1]
 
 
 def splat_mask(
@@ -189,13 +192,17 @@ def splat_mask(
     """
     shape = guide.shape[:2]
     offset = jnp.asarray(offset)
-    own = lax.stop_gradient(guide[_side_pixel(edges, offset, SIDE_DISTANCE, k, shape)])
+    guide = lax.stop_gradient(guide)
+    # Colour planes: gathers from (H, W) planes vectorise, from channels-last pixels not.
+    planes = [guide[..., c] for c in range(guide.shape[-1])]
+    own_px = _side_pixel(edges, offset, SIDE_DISTANCE, k, shape)
+    own = [p[own_px] for p in planes]
     across = _side_pixel(edges, offset, -SIDE_DISTANCE, k, shape)
-    uniform = lax.stop_gradient(uniform_window(guide))[across] < config.centre.splat_uniform
+    uniform = uniform_window(guide)[across] < config.centre.splat_uniform
     limit = jnp.square(config.centre.splat_colour)
 
     def corner_scale(col: Array, row: Array) -> Array:
-        far = jnp.sum(jnp.square(lax.stop_gradient(guide[row, col]) - own), axis=-1) > limit
+        far = sum(jnp.square(p[row, col] - o) for p, o in zip(planes, own, strict=True)) > limit
         return jnp.where(uniform & far, 0.0, 1.0).astype(guide.dtype)
 
     return corner_scale
