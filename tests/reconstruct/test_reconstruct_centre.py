@@ -49,6 +49,23 @@ def _step_edges(H: int, split: int, d_left: float, d_right: float, dtype=np.floa
     return edges, jnp.asarray(off), jnp.ones(n, dtype)
 
 
+def _points(xs, ys, d) -> EdgeSet:
+    """Valid, visible edge points of unit confidence at ``(xs, ys)`` with labels ``d``."""
+    n = len(xs)
+    return EdgeSet(
+        x=jnp.asarray(xs),
+        y=jnp.asarray(ys),
+        disparity=jnp.asarray(d),
+        confidence=jnp.ones(n),
+        visible=jnp.ones(n, bool),
+        lab=jnp.zeros((n, 3)),
+        direction=jnp.zeros(n, jnp.int32),
+        intercepts=jnp.zeros((n, 2)),
+        valid=jnp.ones(n, bool),
+        n_dropped=jnp.zeros((), jnp.int32),
+    )
+
+
 def test_centre_oracle_accuracy(small_scene):
     lf, edges, surface = small_scene
     d = jax.jit(centre_disparity)(edges, surface, lf.centre_view, ReconstructConfig())
@@ -88,18 +105,7 @@ def test_depth_edge_confidence_blocks_leakage():
     ys = np.tile(np.arange(H, dtype=np.float32), 2)
     d = np.concatenate([np.full(H, 1.0), np.full(H, -1.0)]).astype(np.float32)
     n = 2 * H
-    edges = EdgeSet(
-        x=jnp.asarray(xs),
-        y=jnp.asarray(ys),
-        disparity=jnp.asarray(d),
-        confidence=jnp.ones(n),
-        visible=jnp.ones(n, bool),
-        lab=jnp.zeros((n, 3)),
-        direction=jnp.zeros(n, jnp.int32),
-        intercepts=jnp.zeros((n, 2)),
-        valid=jnp.ones(n, bool),
-        n_dropped=jnp.zeros((), jnp.int32),
-    )
+    edges = _points(xs, ys, d)
     conf = np.zeros((H, W), np.float32)
     conf[:, split : split + 2] = 1.0
     truth = np.where(np.arange(W)[None] <= split, 1.0, -1.0) * np.ones((H, 1))
@@ -130,18 +136,7 @@ def _panel_on_floor(floor_noise: float):
     n = 2 * H
     off = np.zeros((n, 2), np.float32)
     off[:, 0] = -1.0  # both point left: the panel's labels into the panel, the floor's into it
-    edges = EdgeSet(
-        x=jnp.asarray(xs),
-        y=jnp.asarray(ys),
-        disparity=jnp.asarray(d),
-        confidence=jnp.ones(n),
-        visible=jnp.ones(n, bool),
-        lab=jnp.zeros((n, 3)),
-        direction=jnp.zeros(n, jnp.int32),
-        intercepts=jnp.zeros((n, 2)),
-        valid=jnp.ones(n, bool),
-        n_dropped=jnp.zeros((), jnp.int32),
-    )
+    edges = _points(xs, ys, d)
     surface = OracleSurface(jnp.asarray(off), jnp.ones(n), jnp.zeros((H, W)))
     truth = np.where(np.arange(W)[None] <= split, 1.2, -1.0) * np.ones((H, 1))
     return img, edges, surface, truth, split
