@@ -12,7 +12,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab, srgb_to_linear
-from ..solve import SolveResult, guide_edge_weights, solve_poisson
+from ..solve import SolveResult, guide_differences, guide_edge_weights, solve_poisson
 from ._config import ReconstructConfig
 from ._photo import _block_upsample, _window_extrema
 
@@ -151,9 +151,7 @@ def _side_pixel(edges: EdgeSet, offset: Array, distance: float, k: int, shape) -
 def uniform_window(guide: Float[Array, "H W C"]) -> Float[Array, "H W"]:
     """Largest colour difference (Euclidean over the channels, guide units) between two
     4-neighbours of which one lies in the pixel's 3×3 window: small on a uniform region."""
-    planes = [guide[..., c] for c in range(guide.shape[-1])]  # see `backward_warp_planar`
-    dx = jnp.sqrt(sum(jnp.square(p[:, 1:] - p[:, :-1]) for p in planes))
-    dy = jnp.sqrt(sum(jnp.square(p[1:] - p[:-1]) for p in planes))
+    dx, dy = guide_differences(guide)  # as the smoothness weights: XLA computes them once
     zx = jnp.zeros_like(dx[:, :1])
     zy = jnp.zeros_like(dy[:1])
     gx = jnp.maximum(jnp.concatenate([zx, dx], axis=1), jnp.concatenate([dx, zx], axis=1))

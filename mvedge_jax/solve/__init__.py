@@ -12,4 +12,5 @@ from ._solve import describe_status as describe_status
 from ._solve import solve_poisson as solve_poisson
 from ._solve import solve_poisson_lineax as solve_poisson_lineax
 from ._solve import solve_status as solve_status
+from ._weights import guide_differences as guide_differences
 from ._weights import guide_edge_weights as guide_edge_weights

@@ -13,6 +13,16 @@ def _safe_norm(d: Array) -> Array:
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, s, 1.0)), 0.0)
 
 
+def guide_differences(
+    guide: Float[Array, "H W *C"],
+) -> tuple[Float[Array, "H W-1"], Float[Array, "H-1 W"]]:
+    """``|∇guide|`` on the 4-neighbour edges of a grid: the Euclidean norm over the channels
+    of the forward difference between the two pixels each edge joins (guide units; a finite
+    gradient where it is 0). ``guide``: ``(H, W)`` or ``(H, W, C)`` float."""
+    g = guide if guide.ndim == 3 else guide[..., None]
+    return _safe_norm(g[:, 1:] - g[:, :-1]), _safe_norm(g[1:, :] - g[:-1, :])
+
+
 def guide_edge_weights(
     guide: Float[ArrayLike, "H W *C"],
     *,
@@ -51,9 +61,7 @@ def guide_edge_weights(
         eps_value = None
     if eps_value is not None and not eps_value > 0:
         raise ValueError(f"eps must be > 0; got {eps_value}")
-    g = guide if guide.ndim == 3 else guide[..., None]
-    gx = _safe_norm(g[:, 1:] - g[:, :-1])
-    gy = _safe_norm(g[1:, :] - g[:-1, :])
+    gx, gy = guide_differences(guide)
     scale = jnp.asarray(scale, guide.dtype)
     eps = jnp.asarray(eps, guide.dtype)
     return scale / (gx + eps), scale / (gy + eps)
