@@ -34,33 +34,22 @@ def _step_edges(H: int, split: int, d_left: float, d_right: float, dtype=np.floa
     n = 2 * H
     off = np.zeros((n, 2), dtype)
     off[:H, 0], off[H:, 0] = -1.0, 1.0
-    edges = EdgeSet(
-        x=jnp.asarray(x),
-        y=jnp.asarray(y),
+    return _points(x, y, d, dtype), jnp.asarray(off), jnp.ones(n, dtype)
+
+
+def _points(xs, ys, d, dtype=np.float32) -> EdgeSet:
+    """Valid, visible edge points of unit confidence from horizontal EPIs at ``(xs, ys)``
+    with labels ``d``."""
+    n = len(xs)
+    return EdgeSet(
+        x=jnp.asarray(xs),
+        y=jnp.asarray(ys),
         disparity=jnp.asarray(d),
         confidence=jnp.ones(n, dtype),
         visible=jnp.ones(n, bool),
         lab=jnp.zeros((n, 3), dtype),
         direction=jnp.full(n, HORIZONTAL, jnp.int32),
         intercepts=jnp.zeros((n, 2), dtype),
-        valid=jnp.ones(n, bool),
-        n_dropped=jnp.zeros((), jnp.int32),
-    )
-    return edges, jnp.asarray(off), jnp.ones(n, dtype)
-
-
-def _points(xs, ys, d) -> EdgeSet:
-    """Valid, visible edge points of unit confidence at ``(xs, ys)`` with labels ``d``."""
-    n = len(xs)
-    return EdgeSet(
-        x=jnp.asarray(xs),
-        y=jnp.asarray(ys),
-        disparity=jnp.asarray(d),
-        confidence=jnp.ones(n),
-        visible=jnp.ones(n, bool),
-        lab=jnp.zeros((n, 3)),
-        direction=jnp.zeros(n, jnp.int32),
-        intercepts=jnp.zeros((n, 2)),
         valid=jnp.ones(n, bool),
         n_dropped=jnp.zeros((), jnp.int32),
     )
