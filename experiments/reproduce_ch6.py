@@ -95,7 +95,7 @@ SENSITIVITY = {
     "centre.omega": (50.0, 450.0),
     "centre.a": (1.5, 4.5),
     "centre.c": (0.3, 3.0),
-    "centre.eps": (3e-4, 3e-3),
+    "centre.eps": (1e-6, 1e-5),
     "centre.conf_beta": (3.0, 30.0),
     "centre.offset_scale": (0.5, 1.5),
     "sharpen.wmf_sigma": (0.025, 0.1),

@@ -32,7 +32,11 @@ class CentreConfig(eqx.Module):
             vector, pixels).
         c: numerator of the centre smoothness ``c / (|∇I| + ε)``.
         eps: ``ε`` of the centre smoothness, in guide units (see
-            ``ReconstructConfig.colour_space``).
+            ``ReconstructConfig.colour_space``). Small against the guide's quantisation
+            step (one 8-bit level moves the CIELAB / 100 guide by 0.0005 or more), so that
+            it only acts where neighbouring colours are equal: there the weight is
+            ``c / ε``, and a uniform region diffuses as one (docs/ACCURACY.md, "Colour-edge
+            ε"). The centre solve takes more iterations as ``ε`` shrinks.
         conf_beta: depth-edge confidence attenuation: smoothness across an edge is divided by
             ``1 + conf_beta · conf`` (``conf`` the larger confidence of the two pixels).
         splat_uniform: (threshold) a label's splat is tested where the pixel 2 px across
@@ -59,7 +63,7 @@ class CentreConfig(eqx.Module):
     lambda_e_max: Array = hyperparameter(2.0, differentiable=True, lower=0.0)
     offset_scale: Array = hyperparameter(1.0, differentiable=True)
     c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
-    eps: Array = hyperparameter(1e-3, differentiable=True, lower=0.0, lower_open=True)
+    eps: Array = hyperparameter(3e-6, differentiable=True, lower=0.0, lower_open=True)
     conf_beta: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
     splat_uniform: Array = hyperparameter(0.02, differentiable=False, lower=0.0)
     splat_colour: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
