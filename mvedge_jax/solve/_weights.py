@@ -14,11 +14,29 @@ def _safe_norm(d: Array) -> Array:
 
 
 def guide_differences(
-    guide: Float[Array, "H W *C"],
+    guide: Float[ArrayLike, "H W *C"],
 ) -> tuple[Float[Array, "H W-1"], Float[Array, "H-1 W"]]:
     """``|∇guide|`` on the 4-neighbour edges of a grid: the Euclidean norm over the channels
-    of the forward difference between the two pixels each edge joins (guide units; a finite
-    gradient where it is 0). ``guide``: ``(H, W)`` or ``(H, W, C)`` float."""
+    of the forward difference between the two pixels each edge joins.
+
+    Args:
+        guide: ``(H, W)`` or ``(H, W, C)`` image (an integer one is taken as float32).
+
+    Returns:
+        ``(dx (H, W-1), dy (H-1, W))`` in the guide's units and float dtype; differentiable,
+        with a finite gradient where a difference is 0.
+
+    Raises:
+        ValueError: if ``guide`` is not 2-D or 3-D.
+
+    References:
+        The ``|∇I|`` of thesis eq 4.11 and eq 6.4.
+    """
+    guide = jnp.asarray(guide)
+    if guide.ndim not in (2, 3):
+        raise ValueError(f"guide must have shape (H, W) or (H, W, C); got {tuple(guide.shape)}")
+    if not jnp.issubdtype(guide.dtype, jnp.floating):
+        guide = guide.astype(jnp.float32)
     g = guide if guide.ndim == 3 else guide[..., None]
     return _safe_norm(g[:, 1:] - g[:, :-1]), _safe_norm(g[1:, :] - g[:-1, :])
 
@@ -50,11 +68,6 @@ def guide_edge_weights(
     References:
         Thesis eq 4.11 and eq 6.4 (smoothness ``c / (|∇I| + ε)``).
     """
-    guide = jnp.asarray(guide)
-    if guide.ndim not in (2, 3):
-        raise ValueError(f"guide must have shape (H, W) or (H, W, C); got {tuple(guide.shape)}")
-    if not jnp.issubdtype(guide.dtype, jnp.floating):
-        guide = guide.astype(jnp.float32)
     try:
         eps_value = float(eps)
     except Exception:  # a tracer: cannot check
@@ -62,6 +75,6 @@ def guide_edge_weights(
     if eps_value is not None and not eps_value > 0:
         raise ValueError(f"eps must be > 0; got {eps_value}")
     gx, gy = guide_differences(guide)
-    scale = jnp.asarray(scale, guide.dtype)
-    eps = jnp.asarray(eps, guide.dtype)
+    scale = jnp.asarray(scale, gx.dtype)
+    eps = jnp.asarray(eps, gx.dtype)
     return scale / (gx + eps), scale / (gy + eps)

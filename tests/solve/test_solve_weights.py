@@ -1,4 +1,4 @@
-"""Tests of `guide_edge_weights`."""
+"""Tests of `guide_differences` and `guide_edge_weights`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from jax.test_util import check_grads
 
-from mvedge_jax.solve import guide_edge_weights
+from mvedge_jax.solve import guide_differences, guide_edge_weights
 
 
 def test_values_single_channel():
@@ -51,3 +51,20 @@ def test_bad_input():
         guide_edge_weights(np.zeros(5))
     with pytest.raises(ValueError, match="eps must be > 0"):
         guide_edge_weights(np.zeros((4, 4)), eps=0.0)
+
+
+def test_guide_differences_values_and_dtype():
+    g = np.zeros((2, 2, 3), np.uint8)
+    g[0, 1] = [3, 4, 0]  # |Δ| = 5 to both neighbours
+    dx, dy = guide_differences(g)
+    assert dx.shape == (2, 1) and dy.shape == (1, 2) and dx.dtype == jnp.float32
+    np.testing.assert_allclose(dx, [[5.0], [0.0]])
+    np.testing.assert_allclose(dy, [[0.0, 5.0]])
+    wx, wy = guide_edge_weights(g, scale=2.0, eps=1.0)
+    np.testing.assert_allclose(wx, 2.0 / (dx + 1.0))
+    np.testing.assert_allclose(wy, 2.0 / (dy + 1.0))
+
+
+def test_guide_differences_bad_input():
+    with pytest.raises(ValueError, match=r"\(H, W\) or \(H, W, C\); got \(2, 2, 2, 3\)"):
+        guide_differences(np.zeros((2, 2, 2, 3)))
