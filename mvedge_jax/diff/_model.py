@@ -8,6 +8,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._fields import check_fields, hyperparameter
+from .._image import as_float_image
 from ..solve import SolverConfig, SolveResult, solve_poisson
 from ._composite import RenderResult, render
 from ._config import RenderConfig
@@ -89,11 +90,7 @@ def image_gradient_magnitude(image: Float[ArrayLike, "H W *C"]) -> Float[Array, 
     Raises:
         ValueError: if ``image`` is not 2-D or 3-D.
     """
-    image = jnp.asarray(image)
-    if image.ndim not in (2, 3):
-        raise ValueError(f"image must have shape (H, W) or (H, W, C); got {tuple(image.shape)}")
-    if not jnp.issubdtype(image.dtype, jnp.floating):
-        image = image.astype(jnp.float32)
+    image = as_float_image(image, "image")
     im = image if image.ndim == 3 else image[..., None]
     p = jnp.pad(im, ((1, 1), (1, 1), (0, 0)), mode="edge")
     gx = 0.5 * (p[1:-1, 2:] - p[1:-1, :-2])

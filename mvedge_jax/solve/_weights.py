@@ -5,6 +5,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._image import as_float_image
+
 
 def _safe_norm(d: Array) -> Array:
     """Euclidean norm over the last axis with a finite gradient at zero."""
@@ -32,11 +34,7 @@ def guide_differences(
     References:
         The ``|∇I|`` of thesis eq 4.11 and eq 6.4.
     """
-    guide = jnp.asarray(guide)
-    if guide.ndim not in (2, 3):
-        raise ValueError(f"guide must have shape (H, W) or (H, W, C); got {tuple(guide.shape)}")
-    if not jnp.issubdtype(guide.dtype, jnp.floating):
-        guide = guide.astype(jnp.float32)
+    guide = as_float_image(guide, "guide")
     g = guide if guide.ndim == 3 else guide[..., None]
     return _safe_norm(g[:, 1:] - g[:, :-1]), _safe_norm(g[1:, :] - g[:-1, :])
 
