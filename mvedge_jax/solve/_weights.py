@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import functools
+import operator
+
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from .._image import as_float_image
 
 
-def _safe_norm(d: Array) -> Array:
-    """Euclidean norm over the last axis with a finite gradient at zero."""
-    s = jnp.sum(d * d, axis=-1)
+def _safe_norm(parts: list[Array]) -> Array:
+    """Euclidean norm of the arrays ``parts`` (one per channel), element by element, with a
+    finite gradient at zero."""
+    s = functools.reduce(operator.add, (d * d for d in parts))
     pos = s > 0
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, s, 1.0)), 0.0)
 
@@ -35,8 +39,13 @@ def guide_differences(
         The ``|∇I|`` of thesis eq 4.11 and eq 6.4.
     """
     guide = as_float_image(guide, "guide")
-    g = guide if guide.ndim == 3 else guide[..., None]
-    return _safe_norm(g[:, 1:] - g[:, :-1]), _safe_norm(g[1:, :] - g[:-1, :])
+    # The channels as separate (H, W) planes: a reduction over a short channel axis makes
+    # XLA's CPU backend write both shifted slices to memory first.
+    planes = [guide] if guide.ndim == 2 else [guide[..., c] for c in range(guide.shape[-1])]
+    return (
+        _safe_norm([p[:, 1:] - p[:, :-1] for p in planes]),
+        _safe_norm([p[1:, :] - p[:-1, :] for p in planes]),
+    )
 
 
 def guide_edge_weights(
