@@ -16,12 +16,11 @@ from ..lightfield import LightField
 from ._bank import bank_width, blur_images, filter_disparities, prewitt_bank
 from ._config import EdgeConfig
 from ._detect import (
-    centre_responses,
+    centre_response_magnitude,
     detect_centre_row,
     local_std,
     non_max_suppress,
     parabola_offset,
-    response_magnitude,
     soft_select,
     top_candidates,
 )
@@ -616,7 +615,7 @@ def soft_filter_responses(
     )
     blur = blur_images(_srgb_to_lab(views) * _LAB_SCALE, presmooth_sigma, blur_radius)
     perm = (1, 0, 2, 3) if direction == HORIZONTAL else (2, 0, 1, 3)
-    mag = response_magnitude(centre_responses(jnp.transpose(blur, perm), bank))  # (A, B, n)
+    mag = centre_response_magnitude(jnp.transpose(blur, perm), bank)  # (A, B, n)
     return (mag if direction == HORIZONTAL else jnp.swapaxes(mag, 0, 1)), disps
 
 

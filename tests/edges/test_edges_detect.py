@@ -15,13 +15,39 @@ from mvedge_jax.edges import (
     prewitt_bank,
     soft_detect,
 )
-from mvedge_jax.edges._detect import local_std, non_max_suppress
+from mvedge_jax.edges._detect import (
+    centre_bank,
+    centre_response_magnitude,
+    local_std,
+    non_max_suppress,
+)
 from mvedge_jax.edges._refine import variance_search
 
 
 def _bank(n=41, d_max=2.0, h=9):
     d = filter_disparities(n, d_max)
     return d, prewitt_bank(d, 2 * h - 1, bank_width(2 * h - 1, d_max, 1.5))
+
+
+def test_centre_response_magnitude_matches_direct_sum():
+    # The norm over the channels of each filter's correlation with the centre rows, written
+    # out in NumPy: out[n, x, i] = |sum_{a,k} sub[i, a, k] epi_pad[n, a, x + k, :]|.
+    rng = np.random.default_rng(3)
+    disps, bank = _bank(n=7, d_max=1.5, h=5)
+    epis = rng.random((2, 5, 23, 3)).astype(np.float32)
+    got = np.asarray(centre_response_magnitude(jnp.asarray(epis), bank))
+    sub = np.asarray(centre_bank(bank, 5), np.float64)
+    n, h, fw = sub.shape
+    pad = np.pad(epis.astype(np.float64), ((0, 0), (0, 0), (fw // 2, fw // 2), (0, 0)), "edge")
+    want = np.zeros((2, 23, n))
+    for x in range(23):
+        win = pad[:, :, x : x + fw, :]  # (N, h, fw, C)
+        r = np.einsum("iak,nakc->nci", sub, win)
+        want[:, x] = np.sqrt(np.sum(r * r, axis=1))
+    assert got.shape == (2, 23, 7) and got.dtype == np.float32
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="at least 3 views"):
+        centre_response_magnitude(jnp.asarray(epis[:, :2]), bank)
 
 
 @pytest.mark.parametrize("i", [0, 3, 10, 12, 20, 30, 31, 38, 40])
