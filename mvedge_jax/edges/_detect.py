@@ -128,13 +128,16 @@ def detect_centre_row(
 def local_std(epis: Float[Array, "N h W C"]) -> Float[Array, "N W"]:
     """Colour standard deviation of the 3x3 window around each centre-row EPI pixel
     (Euclidean norm of the per-channel standard deviations; edge-replicated borders)."""
-    h = epis.shape[1]
-    rows = epis[:, h // 2 - 1 : h // 2 + 2]  # (N, 3, W, C)
-    p = jnp.pad(rows, ((0, 0), (0, 0), (1, 1), (0, 0)), mode="edge")
-    W = epis.shape[2]
-    win = jnp.stack([p[:, :, i : i + W] for i in range(3)], axis=1)  # (N, 3, 3, W, C)
-    var = jnp.var(win, axis=(1, 2))  # (N, W, C)
-    return jnp.sqrt(jnp.sum(var, axis=-1) + _EPS)
+    h, W = epis.shape[1], epis.shape[2]
+    # Each channel as (N, W) planes of the nine window samples: a variance over stacked
+    # samples and a sum over the short channel axis run ~8x slower on XLA's CPU backend.
+    variances = []
+    for c in range(epis.shape[-1]):
+        rows = jnp.pad(epis[:, h // 2 - 1 : h // 2 + 2, :, c], ((0, 0), (0, 0), (1, 1)), "edge")
+        samples = [rows[:, a, i : i + W] for a in range(3) for i in range(3)]
+        mean = functools.reduce(operator.add, samples) / 9.0
+        variances.append(functools.reduce(operator.add, [(x - mean) ** 2 for x in samples]) / 9.0)
+    return jnp.sqrt(functools.reduce(operator.add, variances) + _EPS)
 
 
 def non_max_suppress(conf: Float[Array, "N W"]) -> Float[Array, "N W"]:

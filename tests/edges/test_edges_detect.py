@@ -50,6 +50,19 @@ def test_centre_response_magnitude_matches_direct_sum():
         centre_response_magnitude(jnp.asarray(epis[:, :2]), bank)
 
 
+def test_local_std_matches_numpy():
+    # The norm over the channels of the standard deviations of each centre-row pixel's 3x3
+    # window (edge-replicated columns).
+    rng = np.random.default_rng(4)
+    epis = rng.random((3, 7, 19, 3)).astype(np.float32)
+    rows = np.pad(epis[:, 2:5].astype(np.float64), ((0, 0), (0, 0), (1, 1), (0, 0)), "edge")
+    win = np.stack([rows[:, :, i : i + 19] for i in range(3)], axis=2)  # (N, 3, 3, W, C)
+    want = np.sqrt(np.sum(np.var(win, axis=(1, 2)), axis=-1))
+    got = np.asarray(local_std(jnp.asarray(epis)))
+    assert got.shape == (3, 19)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+
+
 @pytest.mark.parametrize("i", [0, 3, 10, 12, 20, 30, 31, 38, 40])
 def test_label_on_known_slope(make_step_epi, i):
     # Two blurred step edges with the slope of filter i: the two NMS peaks sit on the edges and
