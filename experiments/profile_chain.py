@@ -76,7 +76,9 @@ def parse_dump(path: str) -> tuple[str, dict[str, list[tuple[str, str, int]]]]:
             m = _INSTRUCTION.match(line)
             if m:
                 frame_of[m.group(1)] = int(m.group(2))
-    field = lambda text, key: int(re.search(key + r"=(\d+)", text).group(1))  # noqa: E731
+
+    def field(text: str, key: str) -> int:
+        return int(re.search(key + r"=(\d+)", text).group(1))
 
     def frame(fid: int) -> tuple[str, str, int]:
         loc = tables["FileLocations"][field(tables["StackFrames"][fid], "file_location_id")]
@@ -85,8 +87,10 @@ def parse_dump(path: str) -> tuple[str, dict[str, list[tuple[str, str, int]]]]:
             file = str(Path(file).resolve().relative_to(ROOT))
         except ValueError:
             pass
-        return file, tables["FunctionNames"][field(loc, "function_name_id")].strip('"'), field(
-            loc, "line"
+        return (
+            file,
+            tables["FunctionNames"][field(loc, "function_name_id")].strip('"'),
+            field(loc, "line"),
         )
 
     def stack(fid: int) -> list[tuple[str, str, int]]:
