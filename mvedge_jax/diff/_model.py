@@ -88,7 +88,7 @@ def image_gradient_magnitude(image: Float[ArrayLike, "H W *C"]) -> Float[Array, 
         ``(H, W)`` gradient magnitude in image units per pixel.
 
     Raises:
-        ValueError: if ``image`` is not 2-D or 3-D.
+        ValueError: if ``image`` is not 2-D or 3-D, or 3-D with no channel.
     """
     image = as_float_image(image, "image")
     im = image if image.ndim == 3 else image[..., None]

@@ -20,6 +20,8 @@ _EPS = 1e-12
 def _check_epis(epis, bank):
     if epis.ndim != 4:
         raise ValueError(f"epis must have shape (N, h, W, C); got {tuple(epis.shape)}")
+    if epis.shape[-1] == 0:
+        raise ValueError(f"epis have no channel: shape {tuple(epis.shape)}")
     if bank.ndim != 3 or bank.shape[2] % 2 == 0:
         raise ValueError(f"bank must have shape (n, rows, odd width); got {tuple(bank.shape)}")
     h = epis.shape[1]
@@ -84,8 +86,8 @@ def centre_response_magnitude(
         ``(N, W, n)`` magnitudes (Euclidean norm over the channels), the dtype of ``epis``.
 
     Raises:
-        ValueError: if ``epis`` is not 4-D with at least 3 rows, or ``bank`` is not
-            ``(n, R, Fw)`` with ``R >= h`` odd and ``Fw`` odd.
+        ValueError: if ``epis`` is not 4-D with at least 3 rows and a channel, or ``bank`` is
+            not ``(n, R, Fw)`` with ``R >= h`` odd and ``Fw`` odd.
 
     References:
         Thesis Alg. 1 (the filter responses of the oriented bank, Sec. 4.1.1).

@@ -33,7 +33,7 @@ def guide_differences(
         with a finite gradient where a difference is 0.
 
     Raises:
-        ValueError: if ``guide`` is not 2-D or 3-D.
+        ValueError: if ``guide`` is not 2-D or 3-D, or 3-D with no channel.
 
     References:
         The ``|∇I|`` of thesis eq 4.11 and eq 6.4.
@@ -70,7 +70,8 @@ def guide_edge_weights(
         `solve_poisson`.
 
     Raises:
-        ValueError: if ``guide`` is not 2-D or 3-D, or a concrete ``eps`` is not positive.
+        ValueError: if ``guide`` is not 2-D or 3-D (with a channel), or a concrete ``eps`` is
+            not positive.
 
     References:
         Thesis eq 4.11 and eq 6.4 (smoothness ``c / (|∇I| + ε)``).

@@ -48,6 +48,8 @@ def test_centre_response_magnitude_matches_direct_sum():
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="at least 3 views"):
         centre_response_magnitude(jnp.asarray(epis[:, :2]), bank)
+    with pytest.raises(ValueError, match="no channel"):
+        centre_response_magnitude(jnp.zeros((2, 5, 23, 0)), bank)
 
 
 def test_local_std_matches_numpy():

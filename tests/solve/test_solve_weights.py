@@ -68,3 +68,5 @@ def test_guide_differences_values_and_dtype():
 def test_guide_differences_bad_input():
     with pytest.raises(ValueError, match=r"\(H, W\) or \(H, W, C\); got \(2, 2, 2, 3\)"):
         guide_differences(np.zeros((2, 2, 2, 3)))
+    with pytest.raises(ValueError, match=r"guide has no channel: shape \(4, 5, 0\)"):
+        guide_differences(np.zeros((4, 5, 0)))
