@@ -81,8 +81,10 @@ def build_bank(config: EdgeConfig, n_views: int, d_max: float):
 
 
 def _srgb_to_lab(rgb: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
-    """CIELAB (D65) of sRGB in [0, 1]; numerically the same as `rgb_to_lab` but ~6x faster on
-    XLA:CPU (no ``cbrt``, no 3x3 matmul)."""
+    """CIELAB (D65) of sRGB in [0, 1], the edge detection's own copy of `rgb_to_lab`: the
+    same formulas, with the white point divided after the matrix product instead of folded
+    into it, so the two differ by rounding (at most 6·10⁻⁵ in L*a*b*) and run equally fast
+    (a 9×512² stack: 53 and 54 ms)."""
     lin = jnp.where(
         rgb > 0.04045,
         jnp.exp(2.4 * jnp.log((jnp.maximum(rgb, 0.04045) + 0.055) / 1.055)),
