@@ -41,8 +41,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("MVEDGE_DATA", ROOT.parent / "shared" / "data"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_chain import DATA, ROOT, _load  # noqa: E402  (imports no JAX at module level)
+
 DEFAULT_SCENE = DATA / "hci4d" / "stratified" / "backgammon"
 # Frames of the pipeline's plumbing (jit wrappers, the stage cache, the driver): the call
 # path starts below them, at the stage functions of `mvedge_jax.pipeline._chain`.
@@ -132,7 +133,7 @@ def attribute(events: list[dict], programs: dict[str, list[dict]]) -> list[tuple
     return out
 
 
-def tables(attributed, depth: int) -> dict[str, collections.Counter]:
+def charge(attributed, depth: int) -> dict[str, collections.Counter]:
     """Thunk seconds and counts per step, function and line."""
     seconds = {k: collections.Counter() for k in ("step", "function", "line")}
     counts = {k: collections.Counter() for k in seconds}
@@ -178,11 +179,9 @@ def main() -> None:
         ).strip()
         import jax
 
-        from mvedge_jax.io import load_light_field
         from mvedge_jax.pipeline import PipelineConfig, device_info, estimate_disparity
-        from mvedge_jax.synthetic import default_light_field
 
-        lf = default_light_field() if args.scene == "synthetic" else load_light_field(args.scene)
+        lf = _load(args.scene)
         config = PipelineConfig()
         print(f"[profile_chain] {args.scene}: compiling and a warm run ...", flush=True)
         for _ in range(2):
@@ -206,7 +205,7 @@ def main() -> None:
                 for e in json.load(f)["traceEvents"]
                 if e.get("ph") == "X" and "hlo_op" in e.get("args", {})
             ]
-    result = tables(attribute(events, programs), args.depth)
+    result = charge(attribute(events, programs), args.depth)
     total = sum(result["seconds"]["line"].values())
     print(
         f"\n{args.scene}, {device_info()['device']}: traced call {wall:.2f} s wall, "
