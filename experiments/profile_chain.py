@@ -210,7 +210,8 @@ def main() -> None:
                 return estimate_disparity(lf, config).disparity
 
             calls = 2
-        print(f"[profile_chain] {args.scene}: compiling and a warm run ...", flush=True)
+        what = "compiling and a warm run" if calls > 1 else "compiling"
+        print(f"[profile_chain] {args.scene}: {what} ...", flush=True)
         for _ in range(calls):
             jax.block_until_ready(run())
         print("[profile_chain] traced run ...", flush=True)
