@@ -6,9 +6,6 @@ is all the centre-view points need and ~h times cheaper than the full EPI.
 
 from __future__ import annotations
 
-import functools
-import operator
-
 import jax
 import jax.numpy as jnp
 from jax import lax
@@ -94,7 +91,7 @@ def centre_response_magnitude(
     """
     out = _centre_conv(epis, bank)
     squares = [out[:, c] * out[:, c] for c in range(out.shape[1])]
-    return jnp.sqrt(functools.reduce(operator.add, squares) + _EPS)
+    return jnp.sqrt(sum(squares) + _EPS)
 
 
 def detect_centre_row(
@@ -137,9 +134,9 @@ def local_std(epis: Float[Array, "N h W C"]) -> Float[Array, "N W"]:
     for c in range(epis.shape[-1]):
         rows = jnp.pad(epis[:, h // 2 - 1 : h // 2 + 2, :, c], ((0, 0), (0, 0), (1, 1)), "edge")
         samples = [rows[:, a, i : i + W] for a in range(3) for i in range(3)]
-        mean = functools.reduce(operator.add, samples) / 9.0
-        variances.append(functools.reduce(operator.add, [(x - mean) ** 2 for x in samples]) / 9.0)
-    return jnp.sqrt(functools.reduce(operator.add, variances) + _EPS)
+        mean = sum(samples) / 9.0
+        variances.append(sum((x - mean) ** 2 for x in samples) / 9.0)
+    return jnp.sqrt(sum(variances) + _EPS)
 
 
 def non_max_suppress(conf: Float[Array, "N W"]) -> Float[Array, "N W"]:

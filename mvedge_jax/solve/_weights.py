@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import functools
-import operator
-
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -14,7 +11,7 @@ from .._image import as_float_image
 def _safe_norm(parts: list[Array]) -> Array:
     """Euclidean norm of the arrays ``parts`` (one per channel), element by element, with a
     finite gradient at zero."""
-    s = functools.reduce(operator.add, (d * d for d in parts))
+    s = sum(d * d for d in parts)
     pos = s > 0
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, s, 1.0)), 0.0)
 
