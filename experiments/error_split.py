@@ -96,13 +96,16 @@ TEXTURE_GRAD = 2.0  # CIELAB units per pixel
 SIDE_DIST = 1.5  # px
 
 
-def load_scene(name: str):
-    """The light field of a scene name of `SCENES`."""
+def load_scene(name: str, seed: int = 0):
+    """The light field of a scene name of `SCENES`; ``seed`` is the texture seed of the
+    synthetic variants (`variant_scene`; for ``"wide"`` also its layout). The real scenes and
+    the synthetic default scene have one rendering and ignore it."""
     if name in REAL:
         return load_light_field(DATA / REAL[name])
     if name == "default":
         return default_light_field()
-    return variant_scene(name)
+    lf = variant_scene(name, seed)
+    return lf if seed == 0 else dataclasses.replace(lf, name=f"{lf.name}-s{seed}")
 
 
 def colour_gradient(img: np.ndarray) -> np.ndarray:
