@@ -397,6 +397,15 @@ class EpiConfig(eqx.Module):
             along the frame where content from outside the centre view's frame enters a
             view: there the inpainting and the 2-D fill see only the surface beside the
             strip, often a nearer one.
+        visibility_passes: with ``visibility_fill``, how many 2-D fills a hole gets whose
+            three candidates the centre view all contradicts. Pass ``k > 1`` fills those
+            holes anew (``fill_choice``) from every other pixel, including the holes the
+            passes before resolved, and a hole takes the value where the centre view does not
+            contradict it. A disocclusion flanked by nearer surfaces along its row (or
+            column) reaches the background it shows only through the holes above or below
+            it, which the first pass resolves (synthetic slanted variant: worst view MSE×100
+            1.10 → 0.91; not in the thesis). 1 = a single fill. A view without such
+            holes skips the further passes.
         solver: `SolverConfig` of the batched EPI solves (thin ``A × L`` grids, where a
             Jacobi preconditioner is much faster than the batched multigrid).
 
@@ -422,6 +431,7 @@ class EpiConfig(eqx.Module):
     fill_choice: str = static("colour", choices=FILL_CHOICES)
     hole_value: str = static("fill", choices=HOLE_VALUES)
     visibility_fill: bool = static(True)
+    visibility_passes: int = static(2, lower=1, upper=8)
     visibility_tol: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
     colour_margin: Array = hyperparameter(0.3, differentiable=False, lower=0.0)
     solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)

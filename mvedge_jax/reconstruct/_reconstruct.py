@@ -351,10 +351,13 @@ def _cross_hair_fill(
     ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map;
     ``guides`` ``(K, H, W, C)``: the views' colour guides."""
     ok = valid & (conf > config.epi.min_confidence)
-    if config.epi.fill_choice == "colour":
-        view_bg = jax.vmap(colour_fill, (0, 0, 0, None))(maps, ok, guides, config.epi.colour_margin)
-    else:
-        view_bg = jax.vmap(background_fill)(maps, ok)
+
+    def view_fill(values, keep, guide):
+        if config.epi.fill_choice == "colour":
+            return colour_fill(values, keep, guide, config.epi.colour_margin)
+        return background_fill(values, keep)
+
+    view_bg = jax.vmap(view_fill)(maps, ok, guides)
     # The value a hole takes: the view background, or the farther of it and the inpainted
     # value (``hole_value = "farther"``); `inpainted` marks where that is the inpainted one.
     if config.epi.hole_value == "fill":
@@ -377,8 +380,26 @@ def _cross_hair_fill(
         # value, view background and angular background that the centre view does not
         # contradict.
         best = jnp.max(jnp.where(bad, -jnp.inf, cands), axis=0)
-        chosen = jnp.where(bad_hole & ~jnp.all(bad, axis=0), best, hole)
+        all_bad = jnp.all(bad, axis=0)
+        chosen = jnp.where(bad_hole & ~all_bad, best, hole)
         fallback = jnp.where(ok, maps, jnp.where(valid, hole, chosen))
+
+        def refill(args):
+            # Holes with every candidate contradicted ("stuck"): the view's 2-D fill again,
+            # from every pixel that is not stuck (the resolved holes included), where the
+            # centre view does not contradict it. Views without such holes skip the fill.
+            values, stuck, guide, offset = args
+
+            def again(_):
+                filled = view_fill(values, ~stuck, guide)
+                take = stuck & ~contradicted_by_centre(filled, centre_map, offset, tol)
+                return jnp.where(take, filled, values), stuck & ~take
+
+            return lax.cond(jnp.any(stuck), again, lambda _: (values, stuck), None)
+
+        stuck = ~valid & all_bad
+        for _ in range(config.epi.visibility_passes - 1):
+            fallback, stuck = lax.map(refill, (fallback, stuck, guides, offsets))
     return fallback.at[centre].set(maps[centre])
 
 

@@ -106,3 +106,42 @@ def test_hole_value_chooses_between_the_blend_and_the_fill(hole_value):
 def test_hole_value_is_checked():
     with pytest.raises(ValueError, match="hole_value"):
         EpiConfig(hole_value="nearest")
+
+
+@pytest.mark.parametrize("fill_choice", ["colour", "farthest"])
+@pytest.mark.parametrize("passes", [1, 2])
+def test_second_pass_reaches_the_background_through_resolved_holes(passes, fill_choice):
+    """One row of 3 views (the centre is view 1; view 0 is one step left, ``dc = -1``).
+    Centre map: background (-2) in columns 0-2, foreground (+2) from column 3. View 0: a
+    black disocclusion in columns 3-4 of every row, flanked by white foreground (+2) except
+    in row 0, where the black background (-2) lies to its left. Row 0's holes take the
+    background in the first pass. In rows 1-5 the first pass's candidates are all
+    foreground (left, right, and the same pixel in the centre view), and the centre view
+    contradicts each (traced to columns 1-2, where it sees the background): they keep the
+    foreground with one pass; the second pass finds the resolved row 0 above them, which
+    the centre view does not contradict (traced to columns 5-6, behind its foreground). The
+    colour choice and the farthest value agree here. Views 1 and 2 have no holes."""
+    K, H, W = 3, 6, 9
+    centre = jnp.full((H, W), 2.0).at[:, :3].set(-2.0)
+    view0 = jnp.full((H, W), 2.0).at[0, :3].set(-2.0)
+    maps = jnp.stack([view0, centre, centre])
+    valid = jnp.ones((K, H, W), bool).at[0, :, 3:5].set(False)
+    black = jnp.zeros((H, W), bool).at[0, :3].set(True).at[:, 3:5].set(True)
+    grey = jnp.where(black, 0.0, 1.0)
+    guides = jnp.stack([grey, jnp.full((H, W), 0.5), jnp.full((H, W), 0.5)])[..., None]
+    guides = jnp.broadcast_to(guides, (K, H, W, 3))
+    offsets = jnp.stack([jnp.zeros(K), jnp.arange(K) - 1.0], axis=1)
+    epi = EpiConfig(visibility_passes=passes, fill_choice=fill_choice)
+    config = dataclasses.replace(ReconstructConfig(), epi=epi)
+    out = np.asarray(
+        _cross_hair_fill(maps, valid, jnp.ones_like(maps), 1, offsets, centre, guides, config)
+    )
+    expected = np.asarray(maps).copy()
+    expected[0, 0, 3:5] = -2.0
+    expected[0, 1:, 3:5] = -2.0 if passes == 2 else 2.0
+    np.testing.assert_array_equal(out, expected)
+
+
+def test_visibility_passes_is_checked():
+    with pytest.raises(ValueError, match="visibility_passes"):
+        EpiConfig(visibility_passes=0)
