@@ -349,6 +349,8 @@ def main(argv=None) -> int:
         "BadPix(0.07) ratios (mse+badpix), or of those and the Q25×100 ratio (all)",
     )
     args = ap.parse_args(argv)
+    if args.seed and (args.sensitivity or args.loo):
+        ap.error("--seed applies to the scene run; --loo and --sensitivity use seed 0")
     if args.sensitivity or args.loo:
         cache = Path(args.cache) if args.cache else None
         if args.sensitivity:
