@@ -397,9 +397,12 @@ def _cross_hair_fill(
 
             return lax.cond(jnp.any(stuck), again, lambda _: (values, stuck), None)
 
-        stuck = ~valid & all_bad
-        for _ in range(config.epi.visibility_passes - 1):
-            fallback, stuck = lax.map(refill, (fallback, stuck, guides, offsets))
+        fallback, _ = lax.fori_loop(
+            1,
+            config.epi.visibility_passes,
+            lambda _, state: lax.map(refill, (*state, guides, offsets)),
+            (fallback, ~valid & all_bad),
+        )
     return fallback.at[centre].set(maps[centre])
 
 
