@@ -60,6 +60,9 @@ if _ENV_OUT in os.environ:
         yield
         _log.write(f"{item.nodeid}\ttest\t-\t{time.perf_counter() - start:.3f}\n")
 
+    def pytest_unconfigure(config):
+        _log.close()
+
 
 # ---- the script ---------------------------------------------------------------------------
 

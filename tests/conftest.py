@@ -10,15 +10,17 @@ from pathlib import Path
 import jax
 import pytest
 
-# Persistent compilation cache: repeated test runs do not recompile. One folder per
-# pytest-xdist worker: JAX writes an entry in place, without a lock unless the cache has a size
-# cap, so one worker could read an entry that the other is still writing (JAX then warns
-# about a truncated entry and recompiles).
-_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "main")
+# Persistent compilation cache: repeated test runs do not recompile, and a program that one
+# pytest-xdist worker compiled is read by the other (files of both compile the same stages). One
+# folder for all workers: JAX's key of a program includes the cache folder's path (through
+# the compile options), so per-worker folders could share nothing. JAX locks the folder
+# (`filelock`) only when the cache has a size cap; without the lock, a worker could read an
+# entry that the other is still writing. The cap is far above what the suite stores (about
+# 60 MB).
 jax.config.update(
-    "jax_compilation_cache_dir",
-    str(Path(__file__).resolve().parents[1] / ".jax_cache" / f"tests-{_WORKER}"),
+    "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache" / "tests")
 )
+jax.config.update("jax_compilation_cache_max_size", 4 << 30)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 # On a GPU, scatter-adds sum in no fixed order, so two evaluations of the chain differ and its
