@@ -16,7 +16,7 @@ import pytest
 # the compile options), so per-worker folders could share nothing. JAX locks the folder
 # (`filelock`) only when the cache has a size cap; without the lock, a worker could read an
 # entry that the other is still writing. The cap is far above what the suite stores (about
-# 60 MB).
+# 70 MB).
 jax.config.update(
     "jax_compilation_cache_dir", str(Path(__file__).resolve().parents[1] / ".jax_cache" / "tests")
 )
