@@ -17,13 +17,6 @@ compile seconds, the medians (and ranges) of the timed calls per stage (``edges`
 ``surface``, ``reconstruct``) and in all, the centre view's MSE×100 and BadPix(0.07) against
 the ground truth when there is one, and the ``--optimize`` walls. Times are wall seconds
 after `jax.block_until_ready`; compare them only between rows of one run on one machine.
-
-The 2-core CPU machines this runs on change speed from hour to hour (docs/RESULTS.md,
-"Speed": 1.4× within forty minutes). Each row therefore also times a fixed reference
-workload before and after the chain's calls (`reference_seconds`: whole-frame window sums
-and an exponential over 81 maps of 512², code that does not depend on the package), and
-prints the chain's median over the reference's mean. Whether that ratio stays constant when
-the machine's speed changes is not yet established; docs/RESULTS.md records the pairs.
 """
 
 from __future__ import annotations
@@ -47,33 +40,6 @@ def _load(scene: str):
     if scene == "synthetic":
         return default_light_field()
     return load_light_field(scene)
-
-
-def reference_seconds(runs: int = 5) -> float:
-    """Median wall seconds of a fixed whole-frame workload (the machine's speed, not the
-    package's): 5×5 window sums of shifted slices and an exponential over 81 maps of 512²,
-    float32, jitted, twice over (about 85 MB per pass, like the chain's per-view steps)."""
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    x = jnp.asarray(np.random.default_rng(0).random((81, 512, 512), np.float32))
-
-    @jax.jit
-    def work(x):
-        for _ in range(2):
-            p = jnp.pad(x, ((0, 0), (2, 2), (2, 2)), mode="edge")
-            box = sum(p[:, a : a + 512, b : b + 512] for a in range(5) for b in range(5))
-            x = jnp.exp(-box / 25.0) * x
-        return x
-
-    jax.block_until_ready(work(x))
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        jax.block_until_ready(work(x))
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
@@ -105,7 +71,6 @@ def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
     }
     per_stage: dict[str, list[float]] = {s: [] for s in STAGES}
     totals: list[float] = []
-    reference = [reference_seconds()]
     for _ in range(repeat):
         t0 = time.perf_counter()
         result = estimate_disparity(lf, config)
@@ -113,8 +78,6 @@ def bench_scene(scene: str, repeat: int, optimize: bool) -> dict:
         totals.append(time.perf_counter() - t0)
         for s in STAGES:
             per_stage[s].append(result.seconds_per_stage[s])
-    reference.append(reference_seconds())
-    row["reference_s"] = reference
     row["stage_median_s"] = {s: statistics.median(v) for s, v in per_stage.items()}
     row["total_s"] = totals
     row["total_median_s"] = statistics.median(totals)
@@ -141,14 +104,13 @@ def print_table(rows: list[dict]) -> None:
     """Print the rows as a Markdown table."""
     head = (
         "| scene | device (deterministic) | first call (compile) s | edges | surface | reconstruct "
-        "| total median (range) s | reference before / after s | total / reference "
-        "| MSE×100 / BadPix(0.07) | --optimize 1st / 2nd s "
+        "| total median (range) s | MSE×100 / BadPix(0.07) | --optimize 1st / 2nd s "
         "| optimized MSE×100 / BadPix(0.07) |"
     )
     print(head)
     print("|" + "---|" * head.count(" | ") + "---|")
     for r in rows:
-        st, ref = r["stage_median_s"], r["reference_s"]
+        st = r["stage_median_s"]
         opt = (
             f"{r['optimize_first_s']:.1f} / {r['optimize_second_s']:.1f}"
             if "optimize_first_s" in r
@@ -159,7 +121,6 @@ def print_table(rows: list[dict]) -> None:
             f"| {r['first_call_s']:.1f} ({r['compile_s']:.1f}) "
             f"| {st['edges']:.2f} | {st['surface']:.2f} | {st['reconstruct']:.2f} "
             f"| {r['total_median_s']:.2f} ({min(r['total_s']):.2f}–{max(r['total_s']):.2f}) "
-            f"| {ref[0]:.3f} / {ref[1]:.3f} | {r['total_median_s'] / statistics.mean(ref):.1f} "
             f"| {_score(r['metrics'])} | {opt} | {_score(r.get('optimize_metrics', {}))} |"
         )
 
