@@ -397,12 +397,13 @@ def _cross_hair_fill(
 
             return lax.cond(jnp.any(stuck), again, lambda _: (values, stuck), None)
 
-        fallback, _ = lax.fori_loop(
-            1,
-            config.epi.visibility_passes,
-            lambda _, state: lax.map(refill, (*state, guides, offsets)),
-            (fallback, ~valid & all_bad),
-        )
+        if config.epi.visibility_passes > 1:
+            fallback, _ = lax.fori_loop(
+                1,
+                config.epi.visibility_passes,
+                lambda _, state: lax.map(refill, (*state, guides, offsets)),
+                (fallback, ~valid & all_bad),
+            )
     return fallback.at[centre].set(maps[centre])
 
 
