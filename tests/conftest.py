@@ -23,6 +23,7 @@ jax.config.update(
 jax.config.update("jax_compilation_cache_max_size", 4 << 30)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
+
 # On a GPU, scatter-adds sum in no fixed order, so two evaluations of the chain differ and its
 # finite differences become noise; the tests compare against exact values and finite
 # differences, so they ask for XLA's deterministic kernels (no effect on the CPU). Before any
@@ -33,6 +34,29 @@ from mvedge_jax import request_deterministic_gpu  # noqa: E402
 request_deterministic_gpu()
 
 DATA = Path(os.environ.get("MVEDGE_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
+
+
+_XLA_OPT = "--xla_backend_optimization_level"
+
+
+def pytest_configure(config):
+    """The default run (``-m 'not slow'``) compiles with XLA's backend (LLVM) at -O0.
+
+    That run compiles several hundred distinct programs and runs most of them on inputs of a
+    few thousand pixels, so code generation costs more than optimised code saves
+    (docs/RESULTS.md, "Unoptimised machine code for the default test run"). The HLO passes,
+    fusion included, run as usual; the machine code differs in rounding only (the whole chain
+    on a 5×5×48² scene: at most 1.4e-5 px per view step from the default level's maps). The
+    slow tests run whole jobs on full-size light fields and keep the default level. An
+    ``--xla_backend_optimization_level`` already in ``$XLA_FLAGS`` is kept (``=2`` tests the
+    optimised code). Runs before the test modules are imported, so before any JAX
+    computation: the flags are read when the backend starts.
+    """
+    if config.getoption("markexpr") != "not slow":
+        return
+    flags = os.environ.get("XLA_FLAGS", "").split()
+    if not any(f.split("=", 1)[0] == _XLA_OPT for f in flags):
+        os.environ["XLA_FLAGS"] = " ".join([*flags, f"{_XLA_OPT}=0"])
 
 
 @pytest.fixture(scope="module", autouse=True)
