@@ -7,9 +7,8 @@ weighted-mean sharpening → cross-hair projection, EPI inpainting and off-cross
 One reverse-mode gradient with respect to every differentiable field at once, then the loss
 at two or more points per field (by a forward-only program of the same loss). The solvers run
 to a 1e-12 relative residual so that finite differences are not limited by the solver's
-tolerance. They pass on
-the CPU; on an H200 with deterministic kernels the chain's reverse pass is off
-(docs/RESULTS.md, "Deterministic kernels: speed and gradients"), and
+tolerance. They pass on the CPU; on an H200 with deterministic kernels the chain's reverse
+pass is off (docs/RESULTS.md, "Deterministic kernels: speed and gradients"), and
 `experiments/chain_gradients.py` prints the comparison per field.
 """
 
@@ -104,12 +103,14 @@ def chain(scene):
     # The finite differences' values come from a forward-only program: with the test run's
     # unoptimised machine code (tests/conftest.py) it compiles in a third of the gradient
     # program's time and runs five times faster, and the differences take 73 values or more.
-    forward = jax.jit(loss)
+    loss_only = jax.jit(loss)
 
     def f(v):
-        return float(forward(v, views, gt))
+        return float(loss_only(v, views, gt))
 
-    return values0, f, f(values0), {p: float(g) for p, g in grad.items()}
+    loss0 = f(values0)
+    np.testing.assert_allclose(loss0, float(value), rtol=1e-9)  # the two programs agree
+    return values0, f, loss0, {p: float(g) for p, g in grad.items()}
 
 
 #: Relative steps of the finite differences, tried in this order.
@@ -121,7 +122,7 @@ def _central_difference(f, values0, f0, path):
     agree to `RTOL`.
 
     The loss is smooth only piecewise: where one of the chain's discrete choices flips (a
-    solver's stopping iteration at the 1e-12 relative residual is one), it jumps, by a few
+    solver's stopping iteration at the 1e-12 relative residual may be one), it jumps, by a few
     1e-11 within 1e-6 of some fields' values when the test run compiles unoptimised machine
     code. A bracket that holds such a jump shows it as a forward and a backward difference
     that disagree (at 1e-6, ``edges.filter.edge_shift``'s 4.677e-3 and 4.641e-3 against a
@@ -136,9 +137,9 @@ def _central_difference(f, values0, f0, path):
         up[path] = values0[path] + h
         down[path] = values0[path] - h
         f_up, f_down = f(up), f(down)
-        forward, backward = (f_up - f0) / h, (f0 - f_down) / h
+        ahead, behind = (f_up - f0) / h, (f0 - f_down) / h
         central = (f_up - f_down) / (2 * h)
-        if abs(forward - backward) <= RTOL * max(abs(forward), abs(backward)):
+        if abs(ahead - behind) <= RTOL * max(abs(ahead), abs(behind)):
             return central
         first = central if first is None else first
     return first
