@@ -24,7 +24,6 @@ jax.config.update(
 jax.config.update("jax_compilation_cache_max_size", 4 << 30)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
-
 # On a GPU, scatter-adds sum in no fixed order, so two evaluations of the chain differ and its
 # finite differences become noise; the tests compare against exact values and finite
 # differences, so they ask for XLA's deterministic kernels (no effect on the CPU). Before any
@@ -58,9 +57,8 @@ def pytest_configure(config):
     fusion included, run as usual; the machine code differs in rounding only (the whole chain
     on a 5×5×48² scene: 64 of the 57,600 values of its maps differ from the default level's
     by more than 1e-5 px per view step, none by 1e-4; its solvers stop at a relative residual
-    of 1e-5). Left
-    as it is: in the slow tests (whole jobs on full-size light fields), on a machine with a
-    GPU or TPU plugin, and where ``$XLA_FLAGS`` already sets
+    of 1e-5). The level is left as it is in the slow tests (whole jobs on full-size light
+    fields), on a machine with a GPU or TPU plugin, and where ``$XLA_FLAGS`` already sets
     ``--xla_backend_optimization_level`` (``=3``, XLA's default, tests the optimised code).
     The flags are read when JAX starts its backend, which the test modules do when they are
     imported, after this hook. A folder's own conftest, loaded before it when the run is

@@ -102,7 +102,8 @@ def chain(scene):
     assert np.isfinite(float(value))
     # The finite differences' values come from a forward-only program: with the test run's
     # unoptimised machine code (tests/conftest.py) it compiles in a third of the gradient
-    # program's time and runs five times faster, and the differences take 73 values or more.
+    # program's time and runs five times faster, and the differences of the 35 fields take 71
+    # values or more.
     loss_only = jax.jit(loss)
 
     def f(v):
