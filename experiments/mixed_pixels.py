@@ -18,6 +18,13 @@
    the three scenes, and for two scenes with ground truths ``g1``, ``g2`` and one map ``m``,
    ``max(MSE(m, g1), MSE(m, g2)) >= MSE(g1, g2) / 4``. Printed: the largest image difference
    and the MSE×100 between the ground truths.
+3. The same maps' squared error split by what the centre view sees (`centre_visibility`):
+   ``seen`` (the pixel's surface point is in the centre view: the projection of the centre
+   map can carry it), ``occluded`` (inside the centre frame but behind a nearer surface
+   there: a disocclusion) and ``outside`` (beyond the centre frame). Printed per scene: each
+   class's contribution to the all-views MSE×100 (and its share of the pixels, %), the
+   worst view with its own split, and how many of its pixels hold half and 90 % of its
+   squared error.
 """
 
 from __future__ import annotations
@@ -47,6 +54,10 @@ CLASSES = {
     "minority": lambda c: c < 0.5,
 }
 DEFAULT_SUPERSAMPLE = 3  # `default_light_field`
+VISIBILITY = ("seen", "occluded", "outside")
+# Largest difference (pixels per view step) between a pixel's ground truth and that of a
+# centre-view pixel next to where it lands for the centre view to see the same surface.
+VISIBILITY_TOLERANCE = 0.3
 
 
 def split_by_coverage(d: np.ndarray, gt: np.ndarray, cov: np.ndarray) -> dict:
@@ -64,6 +75,55 @@ def split_by_coverage(d: np.ndarray, gt: np.ndarray, cov: np.ndarray) -> dict:
     for name, test in CLASSES.items():
         m = test(cov)
         out[name] = (float(100 * e[m].sum() / e.size), float(100 * m.mean()))
+    return out
+
+
+def centre_visibility(gt: np.ndarray) -> np.ndarray:
+    """Which pixels of every view the centre view sees, from the ground truth ``(U, V, H, W)``.
+
+    The point of pixel ``x`` of view ``(r, c)``, of disparity ``g``, lies at ``x + (r − rc,
+    c − cc)·g`` (row, column) in the centre view (the SPEC's sign). Returns ``(U, V, H, W)``
+    int8: 0 (``seen``) where one of the four centre pixels around that position holds a
+    ground truth within `VISIBILITY_TOLERANCE` of ``g``, 2 (``outside``) where the position
+    lies more than half a pixel beyond the centre frame, 1 (``occluded``) elsewhere.
+    """
+    U, V, H, W = gt.shape
+    centre = gt[U // 2, V // 2]
+    yy, xx = np.mgrid[0:H, 0:W]
+    out = np.empty(gt.shape, np.int8)
+    for r in range(U):
+        for c in range(V):
+            g = gt[r, c]
+            fy, fx = yy + (r - U // 2) * g, xx + (c - V // 2) * g
+            seen = np.zeros((H, W), bool)
+            for oy in (0, 1):
+                for ox in (0, 1):
+                    ys, xs = np.floor(fy).astype(int) + oy, np.floor(fx).astype(int) + ox
+                    ok = (ys >= 0) & (ys < H) & (xs >= 0) & (xs < W)
+                    near = np.abs(centre[np.clip(ys, 0, H - 1), np.clip(xs, 0, W - 1)] - g)
+                    seen |= ok & (near < VISIBILITY_TOLERANCE)
+            beyond = (fy < -0.5) | (fy > H - 0.5) | (fx < -0.5) | (fx > W - 0.5)
+            out[r, c] = np.where(seen, 0, np.where(beyond, 2, 1))
+    return out
+
+
+def split_by_visibility(d: np.ndarray, gt: np.ndarray) -> dict:
+    """Each `VISIBILITY` class's contribution to the all-views MSE×100 (and its share of the
+    pixels, %) of maps ``(U, V, H, W)``; the worst view, its MSE×100 split the same way, and
+    how many of its pixels hold half and 90 % of its squared error."""
+    e = (d - gt) ** 2
+    vis = centre_visibility(gt)
+    U, V = gt.shape[:2]
+    worst = np.unravel_index(np.argmax(e.mean(axis=(2, 3))), (U, V))
+    ew, vw = e[worst], vis[worst]
+    ranked = np.cumsum(np.sort(ew.ravel())[::-1]) / max(float(ew.sum()), 1e-30)
+    out = {"worst_view": [int(i) for i in worst]}
+    for k, name in enumerate(VISIBILITY):
+        m = vis == k
+        out[name] = (float(100 * e[m].sum() / e.size), float(100 * m.mean()))
+        out[f"worst_{name}"] = float(100 * ew[vw == k].sum() / ew.size)
+    out["worst_pixels_half"] = int(np.searchsorted(ranked, 0.5) + 1)
+    out["worst_pixels_90"] = int(np.searchsorted(ranked, 0.9) + 1)
     return out
 
 
@@ -138,12 +198,30 @@ def main(argv=None) -> None:
         d = np.asarray(estimate_disparity(lf, PipelineConfig()).disparity)
         r = split_by_coverage(d, np.asarray(lf.gt_disparity), np.asarray(cov))
         r["seconds"] = time.perf_counter() - t
+        r["visibility"] = split_by_visibility(d, np.asarray(lf.gt_disparity))
         results[label] = r
         cells = " | ".join(f"{r[k][0]:.3f} ({r[k][1]:.2f})" for k in CLASSES)
         print(
             f"| {label} | {r['all']:.3f} | {r['worst']:.3f} | {r['centre']:.3f} | "
             f"{r['badpix07']:.2f} | {cells} |",
             flush=True,
+        )
+    print(
+        "\nBy what the centre view sees (all views; then the worst view):\n"
+        "| scene | "
+        + " | ".join(f"{k} (% px)" for k in VISIBILITY)
+        + " | worst view | "
+        + " / ".join(VISIBILITY)
+        + " | pixels holding half / 90 % of it |"
+    )
+    print("|---" * (len(VISIBILITY) + 4) + "|")
+    for label, r in results.items():
+        v = r["visibility"]
+        cells = " | ".join(f"{v[k][0]:.3f} ({v[k][1]:.2f})" for k in VISIBILITY)
+        worst = " / ".join(f"{v[f'worst_{k}']:.3f}" for k in VISIBILITY)
+        print(
+            f"| {label} | {cells} | {tuple(v['worst_view'])} {r['worst']:.3f} | {worst} | "
+            f"{v['worst_pixels_half']} / {v['worst_pixels_90']} |"
         )
     if "textureless" in names:
         twins = textureless_twins()
