@@ -30,6 +30,7 @@ from ._reconstruct import background_fill as background_fill
 from ._reconstruct import centre_seeds as centre_seeds
 from ._reconstruct import colour_fill as colour_fill
 from ._reconstruct import contradicted_by_centre as contradicted_by_centre
+from ._reconstruct import fill_beyond_frame as fill_beyond_frame
 from ._reconstruct import propagate as propagate
 from ._reconstruct import reconstruct as reconstruct
 from ._reconstruct import select_centre as select_centre

@@ -461,6 +461,11 @@ class FillConfig(eqx.Module):
             (`background_fill`). A mixed pixel on a foreground boundary whose merged value
             lost its photometric confidence is a hole too, and its colour finds the
             foreground.
+        frame_margin: (threshold) `fill_beyond_frame`'s ``margin`` (pixels per view step)
+            after the 2-D fill: a hole in a row or column run of holes that reaches the
+            frame's border takes the run's farthest filled value where that value's surface
+            point lies beyond the centre view's frame and is farther than the hole's own
+            value by more than this; 1e9: off.
 
     Attributes (static):
         hole_fill: ``"solve"`` (screened-Poisson fill guided by the view) or ``"background"``
@@ -485,6 +490,7 @@ class FillConfig(eqx.Module):
     hole_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
     min_confidence: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
     colour_margin: Array = hyperparameter(0.2, differentiable=False, lower=0.0)
+    frame_margin: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     hole_fill: str = static("solve", choices=HOLE_FILLS)
     merge: str = static("photo", choices=MERGES)
     crack_parallax: float = static(0.5, lower=0.0)

@@ -185,8 +185,12 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     # guide of a view is sliced, not gathered for the whole stack (64 views of 512² RGB
     # would take another 200 MB). A view missing from a partial grid has an all-zero guide:
     # every candidate ties in colour and the fill is `background_fill`.
+    U, V = guides.shape[:2]
+
     def fill(f, v, r, col):
-        return colour_fill(f, v, guides[r, col], fc.colour_margin)
+        filled = colour_fill(f, v, guides[r, col], fc.colour_margin)
+        offset = jnp.stack([r - U // 2, col - V // 2]).astype(filled.dtype)
+        return fill_beyond_frame(filled, v, offset, fc.frame_margin)
 
     if fc.hole_fill == "background":
         return lax.map(lambda a: fill(*a), (values, valid, rows, cols)), None
@@ -293,6 +297,84 @@ def colour_fill(
     pick = jnp.where(best_dist < far_dist - jnp.asarray(margin, values.dtype), best, far)
     pick = jnp.where(jnp.isfinite(pick), pick, 0.0)
     return jnp.where(valid, values, pick)
+
+
+def fill_beyond_frame(
+    filled: Float[ArrayLike, "H W"],
+    valid: Bool[ArrayLike, "H W"],
+    offset: Float[ArrayLike, " 2"],
+    margin: float | Float[ArrayLike, ""] = 0.1,
+) -> Float[Array, "H W"]:
+    """Give the holes that reach the frame's border the far surface beyond the centre frame.
+
+    A view ``offset = (dr, dc)`` view steps from the centre (rows, columns) sees, along its
+    border, surfaces whose points lie beyond the centre view's frame: the projection of the
+    centre map leaves them holes, and a 2-D fill (`colour_fill`) can give such a hole only
+    the values its rays meet. Where the hole region is cut off by the border, a hole next to
+    a nearer surface may meet that surface alone (the row of the far wall just above a near
+    object's top edge, with the rest of the wall's holes above it up to the border).
+
+    For every run of holes along a row or a column that reaches the frame's border (no
+    valid pixel between the pixel and the border), the run's farthest (smallest) filled
+    value ``v`` replaces a hole's own where it is farther by more than ``margin`` and the
+    surface point it stands for lies beyond the centre frame: ``x + (dr, dc)·v`` (the
+    inverse of `forward_project`) more than half a pixel outside it, so the centre view
+    could not have seen that surface there. Of the four runs (from the top, bottom, left and
+    right border) the farthest such value wins. Valid pixels and holes of runs that do not
+    reach the border are unchanged. jit/vmap-able; a selection of the input values
+    (differentiable in them, not in the choice).
+
+    Args:
+        filled: ``(H, W)`` disparity (pixels per view step), holes already filled (e.g. by
+            `colour_fill`).
+        valid: ``(H, W)`` bool, the pixels that are not holes.
+        offset: ``(2,)`` the view's ``(dr, dc)`` from the centre view, view steps.
+        margin: scalar >= 0, pixels per view step (may be traced); ``inf`` (or 1e9): no
+            change.
+
+    Returns:
+        ``(H, W)`` disparity, the dtype of ``filled``.
+
+    Raises:
+        ValueError: on a non-2-D ``filled``, ``valid`` of another shape, an ``offset`` not of
+            shape ``(2,)``, or a negative or NaN ``margin`` given as a Python number.
+
+    References:
+        Not in the thesis (its off-cross-hair views are the mean of two reprojections, Sec.
+        6.1).
+    """
+    filled = jnp.asarray(filled)
+    valid = jnp.asarray(valid, bool)
+    offset = jnp.asarray(offset, filled.dtype)
+    if filled.ndim != 2:
+        raise ValueError(f"filled must have shape (H, W); got {tuple(filled.shape)}")
+    if valid.shape != filled.shape:
+        raise ValueError(f"valid must have shape {filled.shape}; got {tuple(valid.shape)}")
+    if offset.shape != (2,):
+        raise ValueError(f"offset must have shape (2,); got {tuple(offset.shape)}")
+    if isinstance(margin, (int, float)) and not margin >= 0:
+        raise ValueError(f"margin must be >= 0; got {margin}")
+    H, W = filled.shape
+    big = jnp.asarray(jnp.inf, filled.dtype)
+    hole = ~valid
+    values = jnp.where(hole, filled, big)
+    rows = jnp.arange(H)[:, None]
+    cols = jnp.arange(W)[None, :]
+    any_col, any_row = jnp.any(valid, axis=0), jnp.any(valid, axis=1)
+    # The first and last valid index of every column and row (H, -1, W, -1 where none).
+    top = jnp.where(any_col, jnp.argmax(valid, axis=0), H)[None, :]
+    bottom = jnp.where(any_col, H - 1 - jnp.argmax(valid[::-1], axis=0), -1)[None, :]
+    left = jnp.where(any_row, jnp.argmax(valid, axis=1), W)[:, None]
+    right = jnp.where(any_row, W - 1 - jnp.argmax(valid[:, ::-1], axis=1), -1)[:, None]
+    ys, xs = rows.astype(filled.dtype), cols.astype(filled.dtype)
+    best = jnp.full(filled.shape, big)
+    for run, axis in ((rows < top, 0), (rows > bottom, 0), (cols < left, 1), (cols > right, 1)):
+        far = jnp.min(jnp.where(run, values, big), axis=axis, keepdims=True)
+        cy, cx = ys + offset[0] * far, xs + offset[1] * far
+        beyond = (cy < -0.5) | (cy > H - 0.5) | (cx < -0.5) | (cx > W - 0.5)
+        best = jnp.minimum(best, jnp.where(run & beyond, far, big))
+    margin = jnp.asarray(margin, filled.dtype)
+    return jnp.where(hole & (best < filled - margin), best, filled)
 
 
 def contradicted_by_centre(
@@ -913,7 +995,8 @@ def propagate(
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
        filled (``config.fill.hole_fill``) from the 2-D fill of `colour_fill` with
-       ``fill.colour_margin``.
+       ``fill.colour_margin``, then `fill_beyond_frame` with ``fill.frame_margin`` (holes
+       cut off by the frame's border take the far surface beyond the centre frame).
     4. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre
        (reprojected boundaries are only pixel-accurate), discontinuities marked by
        ``sharpen.matte_view_jump``; with ``sharpen.matte_view_steps > 0`` its background

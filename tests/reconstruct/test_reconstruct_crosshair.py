@@ -6,12 +6,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from jax.test_util import check_grads
 
 from mvedge_jax.reconstruct import (
     EpiConfig,
     ReconstructConfig,
     background_fill,
     colour_fill,
+    fill_beyond_frame,
     inpaint_epis,
     photometric_confidence,
     project_cross_hair,
@@ -199,3 +201,72 @@ def test_colour_fill_rejects_bad_shapes():
         colour_fill(v, ok, g[:3])
     with pytest.raises(ValueError, match="valid"):
         colour_fill(v, ok[:3], g)
+
+
+def _wall_above_object(H=16, W=6):
+    """A view two steps below the centre (offset (2, 0)): a far wall (-3) above a near
+    object (1) from row 6 down. Rows 0-5 are holes (the wall there lies beyond the centre
+    frame: its point is 6 rows higher in the centre view), filled as a 2-D fill along the
+    rows and columns leaves them when the wall's own pixels are out of reach: rows 0-4 the
+    wall, row 5 the object below it."""
+    filled = np.full((H, W), 1.0, np.float32)
+    filled[:5] = -3.0
+    valid = np.ones((H, W), bool)
+    valid[:6] = False
+    return filled, valid
+
+
+def test_fill_beyond_frame_gives_border_holes_the_far_surface():
+    filled, valid = _wall_above_object()
+    out = np.asarray(jax.jit(fill_beyond_frame)(filled, valid, jnp.array([2.0, 0.0])))
+    expected = filled.copy()
+    expected[5] = -3.0  # the hole row next to the object: the wall, 5 + 2 * -3 < -0.5
+    np.testing.assert_array_equal(out, expected)
+    # Seen from a view two steps above the centre, the wall would lie at row 5 - 2 * -3 =
+    # 11 of the centre view, inside its frame: the centre could have seen it, no change.
+    up = np.asarray(fill_beyond_frame(filled, valid, jnp.array([-2.0, 0.0])))
+    np.testing.assert_array_equal(up, filled)
+    # The margin: -3 is 4 farther than the hole's 1.
+    right = jnp.array([2.0, 0.0])
+    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, right, 4.5), filled)
+    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, right, 1e9), filled)
+
+
+def test_fill_beyond_frame_leaves_enclosed_holes_and_valid_pixels():
+    filled, valid = _wall_above_object()
+    valid[0] = True  # the runs no longer reach the top border; rows and columns: none
+    out = np.asarray(fill_beyond_frame(filled, valid, jnp.array([2.0, 0.0])))
+    np.testing.assert_array_equal(out, filled)
+    # Along the rows: a run from the left border, in a view two steps right of the centre.
+    f = np.full((4, 10), 2.0, np.float32)
+    f[:, :3] = -2.0
+    ok = np.ones((4, 10), bool)
+    ok[:, :4] = False
+    out = np.asarray(fill_beyond_frame(f, ok, jnp.array([0.0, 2.0])))
+    np.testing.assert_array_equal(out[:, 3], -2.0)  # 3 + 2 * -2 < -0.5
+    np.testing.assert_array_equal(out[:, 4:], f[:, 4:])
+    np.testing.assert_array_equal(out[:, :3], f[:, :3])
+
+
+def test_fill_beyond_frame_is_a_selection_differentiable_in_the_values():
+    filled, valid = _wall_above_object()
+    # Distinct values, 0.003 apart: no selection switches within the difference step.
+    filled = filled + 0.003 * np.random.default_rng(0).permutation(filled.size).reshape(
+        filled.shape
+    ).astype(np.float32)
+    f = lambda x: fill_beyond_frame(x, valid, jnp.array([2.0, 0.0]))  # noqa: E731
+    check_grads(f, (jnp.asarray(filled, jnp.float32),), order=1, modes=("fwd", "rev"), eps=1e-4)
+    stacked = jax.vmap(f)(jnp.stack([filled, filled]))
+    np.testing.assert_array_equal(stacked[0], stacked[1])
+
+
+def test_fill_beyond_frame_rejects_bad_input():
+    filled, valid = _wall_above_object()
+    with pytest.raises(ValueError, match="filled must have shape"):
+        fill_beyond_frame(filled[None], valid, jnp.zeros(2))
+    with pytest.raises(ValueError, match="valid"):
+        fill_beyond_frame(filled, valid[:3], jnp.zeros(2))
+    with pytest.raises(ValueError, match="offset"):
+        fill_beyond_frame(filled, valid, jnp.zeros(3))
+    with pytest.raises(ValueError, match="margin"):
+        fill_beyond_frame(filled, valid, jnp.zeros(2), -1.0)

@@ -179,6 +179,25 @@ def test_view_matte_snaps_to_the_side_means(small_scene):
     assert not np.array_equal(centre.centre_sharp, default.centre_sharp)
 
 
+def test_frame_margin_acts_on_the_views_off_the_cross_hair_only(small_scene):
+    # `fill.frame_margin` (`fill_beyond_frame`) changes the fill of the holes that reach the
+    # frame's border in the views off the cross-hair; 1e9 turns it off. On this scene it acts
+    # in the corner view (4, 0), whose holes then feed its fill solve.
+    lf, edges, surface = small_scene
+    U, V = lf.grid
+    default = reconstruct(lf.views, edges, surface)
+    off = reconstruct(
+        lf.views, edges, surface, ReconstructConfig(fill=FillConfig(frame_margin=1e9))
+    )
+    np.testing.assert_array_equal(default.cross_h, off.cross_h)
+    np.testing.assert_array_equal(default.cross_v, off.cross_v)
+    changed = np.any(np.asarray(default.disparity != off.disparity), axis=(2, 3))
+    cross = np.zeros((U, V), bool)
+    cross[U // 2, :] = cross[:, V // 2] = True
+    assert not changed[cross].any()
+    assert changed[U - 1, 0]
+
+
 def test_colour_margins_choose_the_hole_fills(small_scene):
     # `epi.colour_margin` sets the 2-D fill of the cross-hair views' holes, `fill.colour_margin`
     # that of the other views (1e9: the farthest neighbouring value, `background_fill`).
