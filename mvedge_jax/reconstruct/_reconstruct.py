@@ -184,7 +184,8 @@ def _fill_views(values, conf, guides, present, rows, cols, config: ReconstructCo
     # One view at a time: the loop's inputs are the merge's materialised outputs, and the
     # guide of a view is sliced, not gathered for the whole stack (64 views of 512² RGB
     # would take another 200 MB). A view missing from a partial grid has an all-zero guide:
-    # every candidate ties in colour and the fill is `background_fill`.
+    # every candidate ties in colour and the 2-D fill is `background_fill` (then
+    # `fill_beyond_frame`, as for every view).
     U, V = guides.shape[:2]
 
     def fill(f, v, r, col):
@@ -308,11 +309,12 @@ def fill_beyond_frame(
     """Give the holes that reach the frame's border the far surface beyond the centre frame.
 
     A view ``offset = (dr, dc)`` view steps from the centre (rows, columns) sees, along its
-    border, surfaces whose points lie beyond the centre view's frame: the projection of the
-    centre map leaves them holes, and a 2-D fill (`colour_fill`) can give such a hole only
-    the values its rays meet. Where the hole region is cut off by the border, a hole next to
-    a nearer surface may meet that surface alone (the row of the far wall just above a near
-    object's top edge, with the rest of the wall's holes above it up to the border).
+    border, surfaces whose points lie beyond the centre view's frame: the reprojections
+    merged into the view leave them holes (or values whose colour does not match), and a
+    2-D fill (`colour_fill`) can give such a hole only the values its rays meet. Where the
+    hole region is cut off by the border, a hole next to a nearer surface may meet that
+    surface alone (the row of the far wall just above a near object's top edge, with the
+    rest of the wall's holes above it up to the border).
 
     For every run of holes along a row or a column that reaches the frame's border (no
     valid pixel between the pixel and the border), the run's farthest (smallest) filled
@@ -325,8 +327,8 @@ def fill_beyond_frame(
     (differentiable in them, not in the choice).
 
     Args:
-        filled: ``(H, W)`` disparity (pixels per view step), holes already filled (e.g. by
-            `colour_fill`).
+        filled: ``(H, W)`` float disparity (pixels per view step), holes already filled
+            (e.g. by `colour_fill`).
         valid: ``(H, W)`` bool, the pixels that are not holes.
         offset: ``(2,)`` the view's ``(dr, dc)`` from the centre view, view steps.
         margin: scalar >= 0, pixels per view step (may be traced); ``inf`` (or 1e9): no
@@ -336,8 +338,9 @@ def fill_beyond_frame(
         ``(H, W)`` disparity, the dtype of ``filled``.
 
     Raises:
-        ValueError: on a non-2-D ``filled``, ``valid`` of another shape, an ``offset`` not of
-            shape ``(2,)``, or a negative or NaN ``margin`` given as a Python number.
+        ValueError: on a non-2-D or non-floating ``filled``, ``valid`` of another shape, an
+            ``offset`` not of shape ``(2,)``, or a negative or NaN ``margin`` given as a
+            Python number.
 
     References:
         Not in the thesis (its off-cross-hair views are the mean of two reprojections, Sec.
@@ -348,6 +351,8 @@ def fill_beyond_frame(
     offset = jnp.asarray(offset, filled.dtype)
     if filled.ndim != 2:
         raise ValueError(f"filled must have shape (H, W); got {tuple(filled.shape)}")
+    if not jnp.issubdtype(filled.dtype, jnp.floating):
+        raise ValueError(f"filled must be a floating array; got {filled.dtype}")
     if valid.shape != filled.shape:
         raise ValueError(f"valid must have shape {filled.shape}; got {tuple(valid.shape)}")
     if offset.shape != (2,):

@@ -1,4 +1,5 @@
-"""Cross-hair projection (z-buffer, holes), EPI line rasterisation and angular inpainting."""
+"""Cross-hair projection (z-buffer, holes), EPI line rasterisation, angular inpainting and
+the hole fills."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from jax.test_util import check_grads
 
 from mvedge_jax.reconstruct import (
     EpiConfig,
+    FillConfig,
     ReconstructConfig,
     background_fill,
     colour_fill,
@@ -19,6 +21,7 @@ from mvedge_jax.reconstruct import (
     project_cross_hair,
     rasterise_lines,
 )
+from mvedge_jax.reconstruct._reconstruct import _fill_views
 
 
 def _square_scene(H=32, W=40, d_bg=-0.5, d_fg=2.0):
@@ -203,14 +206,14 @@ def test_colour_fill_rejects_bad_shapes():
         colour_fill(v, ok[:3], g)
 
 
-def _wall_above_object(H=16, W=6):
-    """A view two steps below the centre (offset (2, 0)): a far wall (-3) above a near
-    object (1) from row 6 down. Rows 0-5 are holes (the wall there lies beyond the centre
-    frame: its point is 6 rows higher in the centre view), filled as a 2-D fill along the
-    rows and columns leaves them when the wall's own pixels are out of reach: rows 0-4 the
-    wall, row 5 the object below it."""
+def _wall_above_object(H=16, W=10, wall=-3.0):
+    """A view two steps below the centre (offset (2, 0)): a far wall above a near object (1)
+    from row 6 down. Rows 0-5 are holes (the wall there lies beyond the centre frame: its
+    point is 6 rows higher in the centre view), filled as a 2-D fill along the rows and
+    columns leaves them when the wall's own pixels are out of reach: rows 0-4 the wall, row 5
+    the object below it."""
     filled = np.full((H, W), 1.0, np.float32)
-    filled[:5] = -3.0
+    filled[:5] = wall
     valid = np.ones((H, W), bool)
     valid[:6] = False
     return filled, valid
@@ -218,18 +221,48 @@ def _wall_above_object(H=16, W=6):
 
 def test_fill_beyond_frame_gives_border_holes_the_far_surface():
     filled, valid = _wall_above_object()
-    out = np.asarray(jax.jit(fill_beyond_frame)(filled, valid, jnp.array([2.0, 0.0])))
+    below = jnp.array([2.0, 0.0])
+    out = np.asarray(jax.jit(fill_beyond_frame)(filled, valid, below))
     expected = filled.copy()
     expected[5] = -3.0  # the hole row next to the object: the wall, 5 + 2 * -3 < -0.5
     np.testing.assert_array_equal(out, expected)
     # Seen from a view two steps above the centre, the wall would lie at row 5 - 2 * -3 =
-    # 11 of the centre view, inside its frame: the centre could have seen it, no change.
+    # 11 of the centre view, inside its frame (and inside it along the columns, which a
+    # swapped offset would test): the centre could have seen it, no change.
     up = np.asarray(fill_beyond_frame(filled, valid, jnp.array([-2.0, 0.0])))
     np.testing.assert_array_equal(up, filled)
-    # The margin: -3 is 4 farther than the hole's 1.
-    right = jnp.array([2.0, 0.0])
-    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, right, 4.5), filled)
-    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, right, 1e9), filled)
+    # The margin: -3 is 4 farther than the hole's 1; the test is strict.
+    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, below, 4.0), filled)
+    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, below, 3.99), expected)
+    np.testing.assert_array_equal(fill_beyond_frame(filled, valid, below, 1e9), filled)
+
+
+def test_fill_beyond_frame_runs_from_every_border():
+    # The same scene turned so that the holes reach the bottom, left and right borders.
+    filled, valid = _wall_above_object()
+    expected = filled.copy()
+    expected[5] = -3.0
+    cases = [
+        (lambda a: a[::-1], (-2.0, 0.0)),  # wall below the object, view above the centre
+        (lambda a: a.T, (0.0, 2.0)),  # wall left of the object, view right of the centre
+        (lambda a: a.T[:, ::-1], (0.0, -2.0)),  # wall on the right, view left of the centre
+    ]
+    for turn, offset in cases:
+        out = fill_beyond_frame(turn(filled), turn(valid), jnp.array(offset))
+        np.testing.assert_array_equal(out, turn(expected), err_msg=str(offset))
+        # The opposite view: the wall's point lands inside the centre frame.
+        back = fill_beyond_frame(turn(filled), turn(valid), -jnp.array(offset))
+        np.testing.assert_array_equal(back, turn(filled), err_msg=str(offset))
+
+
+def test_fill_beyond_frame_half_pixel_past_the_frame():
+    # One step below the centre: row 5's wall point lies at 5 - 5.25 = -0.25, within half a
+    # pixel of the frame (a centre pixel still sees it), or at 5 - 5.75 = -0.75, beyond.
+    for wall, changes in ((-5.25, False), (-5.75, True)):
+        filled, valid = _wall_above_object(wall=wall)
+        out = np.asarray(fill_beyond_frame(filled, valid, jnp.array([1.0, 0.0])))
+        np.testing.assert_array_equal(out[5], wall if changes else filled[5])
+        np.testing.assert_array_equal(out[:5], filled[:5])
 
 
 def test_fill_beyond_frame_leaves_enclosed_holes_and_valid_pixels():
@@ -237,7 +270,7 @@ def test_fill_beyond_frame_leaves_enclosed_holes_and_valid_pixels():
     valid[0] = True  # the runs no longer reach the top border; rows and columns: none
     out = np.asarray(fill_beyond_frame(filled, valid, jnp.array([2.0, 0.0])))
     np.testing.assert_array_equal(out, filled)
-    # Along the rows: a run from the left border, in a view two steps right of the centre.
+    # Valid pixels keep their values even where a run's value would pass the tests.
     f = np.full((4, 10), 2.0, np.float32)
     f[:, :3] = -2.0
     ok = np.ones((4, 10), bool)
@@ -256,17 +289,57 @@ def test_fill_beyond_frame_is_a_selection_differentiable_in_the_values():
     ).astype(np.float32)
     f = lambda x: fill_beyond_frame(x, valid, jnp.array([2.0, 0.0]))  # noqa: E731
     check_grads(f, (jnp.asarray(filled, jnp.float32),), order=1, modes=("fwd", "rev"), eps=1e-4)
-    stacked = jax.vmap(f)(jnp.stack([filled, filled]))
-    np.testing.assert_array_equal(stacked[0], stacked[1])
+    other = filled[::-1].copy()
+    stacked = jax.vmap(f)(jnp.stack([filled, other]))
+    np.testing.assert_array_equal(stacked[0], f(filled))
+    np.testing.assert_array_equal(stacked[1], f(other))
 
 
 def test_fill_beyond_frame_rejects_bad_input():
     filled, valid = _wall_above_object()
     with pytest.raises(ValueError, match="filled must have shape"):
         fill_beyond_frame(filled[None], valid, jnp.zeros(2))
+    with pytest.raises(ValueError, match="floating"):
+        fill_beyond_frame(filled.astype(np.int32), valid, jnp.zeros(2))
     with pytest.raises(ValueError, match="valid"):
         fill_beyond_frame(filled, valid[:3], jnp.zeros(2))
     with pytest.raises(ValueError, match="offset"):
         fill_beyond_frame(filled, valid, jnp.zeros(3))
     with pytest.raises(ValueError, match="margin"):
         fill_beyond_frame(filled, valid, jnp.zeros(2), -1.0)
+
+
+def test_fill_views_applies_fill_beyond_frame_with_the_views_offset():
+    # View (2, 0) of a 3x3 grid, one step below and one left of the centre. Holes fill the
+    # top-right corner (rows 0-5, columns 4-9) up to the top and right borders; the far
+    # wall (-3) is valid left of them in rows 0-4, the near object (1) in row 5 and below.
+    # The 2-D fill gives rows 0-4 the wall and row 5 the object. Row 5's wall point lies at
+    # (5 - 3, x + 3) in the centre view: beyond its right border for x >= 7 only.
+    H, W = 12, 10
+    values = np.full((H, W), 1.0, np.float32)
+    values[:5, :4] = -3.0
+    conf = np.ones((H, W), np.float32)
+    conf[:6, 4:] = 0.0
+    guides = np.zeros((3, 3, H, W, 3), np.float32)
+    config = ReconstructConfig(fill=FillConfig(hole_fill="background"))
+    rows, cols = jnp.array([2], jnp.int32), jnp.array([0], jnp.int32)
+    out, residual = _fill_views(
+        jnp.asarray(values)[None],
+        jnp.asarray(conf)[None],
+        jnp.asarray(guides),
+        jnp.ones((3, 3), bool),
+        rows,
+        cols,
+        config,
+    )
+    assert residual is None
+    expected = values.copy()
+    expected[:5, 4:] = -3.0
+    expected[5, 4:] = 1.0
+    expected[5, 7:] = -3.0
+    np.testing.assert_array_equal(out[0], expected)
+    valid = conf > config.fill.min_confidence
+    two_d = colour_fill(values, valid, guides[2, 0], config.fill.colour_margin)
+    np.testing.assert_array_equal(
+        out[0], fill_beyond_frame(two_d, valid, jnp.array([1.0, -1.0]), config.fill.frame_margin)
+    )
