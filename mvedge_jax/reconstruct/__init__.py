@@ -15,6 +15,7 @@ from ._crosshair import project_cross_hair as project_cross_hair
 from ._crosshair import rasterise_lines as rasterise_lines
 from ._crosshair import solve_epis as solve_epis
 from ._matte import boundary_matte as boundary_matte
+from ._matte import near_surface_colours as near_surface_colours
 from ._matte import observed_background as observed_background
 from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges

@@ -112,6 +112,14 @@ class SharpenConfig(eqx.Module):
             colour lies within this squared distance of the line through the foreground and
             background colours, relative to their squared distance (its ``max_residual``;
             dimensionless; a large value switches the test off).
+        matte_phase: (threshold) `near_surface_colours`' ``phase`` for the centre map's
+            matte (``matte_other_steps``): a sample of another view weighs
+            ``max(0, 1 − φ / matte_phase)``, ``φ`` the distance (pixels) between its pixel
+            and the position of the pixel's nearest surface in that view.
+        matte_align_tolerance: (threshold) `boundary_matte`'s ``align_tolerance`` for the
+            centre map's matte: the other views count where the window's largest disparity
+            lies within this fraction of the two sides' difference of the foreground side's
+            mean (dimensionless).
         sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
             view step. Smooth where the chosen hypothesis does not change (the hypotheses
             scale with it).
@@ -183,6 +191,10 @@ class SharpenConfig(eqx.Module):
             to this many steps away along the grid's axes that see the background surface
             at the pixel unoccluded (`observed_background`), where one does; elsewhere, and
             at 0, from the window mean (not in the thesis).
+        matte_other_steps: the centre map's matte takes the colour mixture of every pixel
+            from the cross-hair views up to this many steps away too, sampled at the
+            pixel's nearest surface (`boundary_matte`'s ``others``, `near_surface_colours`;
+            not in the thesis); 0: from the centre view alone.
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
         matte_colour: the colours of its two-colour mixture model: ``"linear"`` (sRGB
@@ -212,6 +224,8 @@ class SharpenConfig(eqx.Module):
     matte_snap: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
     matte_view_snap: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
+    matte_phase: Array = hyperparameter(0.5, differentiable=False, lower=0.0, lower_open=True)
+    matte_align_tolerance: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
     sweep_support_jump: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
@@ -238,6 +252,7 @@ class SharpenConfig(eqx.Module):
     matte: bool = static(True)
     matte_views: bool = static(True)
     matte_view_steps: int = static(4, lower=0, upper=64)
+    matte_other_steps: int = static(4, lower=0, upper=64)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
     matte_colour: str = static("linear", choices=MATTE_COLOURS)

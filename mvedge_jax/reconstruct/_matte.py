@@ -24,6 +24,9 @@ def boundary_matte(
     snap: float | Array = float("inf"),
     background: Float[ArrayLike, "H W C"] | None = None,
     background_valid: Bool[ArrayLike, "H W"] | None = None,
+    others: Float[ArrayLike, "K H W C"] | None = None,
+    other_weights: Float[ArrayLike, "K H W"] | None = None,
+    align_tolerance: float | Array = 0.1,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -55,9 +58,21 @@ def boundary_matte(
     every decided pixel takes its side's mean; ``inf``: it keeps its value). With
     ``background`` (e.g. `observed_background`): where ``background_valid``, ``B`` is that
     colour, the background surface at the pixel itself as another view sees it unoccluded,
-    instead of the window mean, which texture next to the edge biases. One pass;
-    jit/vmap-able. Not differentiable in the side chosen (a selection); the output is
-    piecewise a weighted mean of the input.
+    instead of the window mean, which texture next to the edge biases.
+
+    With ``others`` (e.g. `near_surface_colours`): ``K`` other views' colours sampled where
+    each pixel's nearest surface lies in them. There the foreground edge is where it is in
+    this view, while the background behind it is another stretch of its texture; each other
+    view gives its own ``α`` (its own window means ``F``, ``B``, the same two sides), and the
+    pixel's ``α`` is the mean of its own (weight 1) and theirs, each weighted by
+    ``other_weights`` and counted only where its ``F`` and ``B`` differ by ``min_separation``.
+    The texture of the background, which biases a single view's ``B``, then averages out.
+    The other views count only where the window's largest disparity lies within
+    ``align_tolerance · |D_F − D_B|`` of ``D_F`` (two surfaces: with a third, nearer one in
+    the window, the samples follow that one).
+
+    One pass; jit/vmap-able. Not differentiable in the side chosen (a selection); the output
+    is piecewise a weighted mean of the input.
 
     The mixture is linear in light, so the model holds for a guide in linear light
     (`srgb_to_linear` of the sRGB values; `SharpenConfig.matte_colour`): in CIELAB or in the
@@ -84,6 +99,11 @@ def boundary_matte(
         background: ``(H, W, C)`` background colour behind every pixel (guide units), or
             ``None`` (the window mean everywhere).
         background_valid: ``(H, W)`` bool, where ``background`` holds (with ``background``).
+        others: ``(K, H, W, C)`` other views' colours at each pixel's nearest surface
+            (guide units), or ``None`` (this view's colours alone).
+        other_weights: ``(K, H, W)`` weights in [0, 1] of ``others`` (with ``others``).
+        align_tolerance: largest difference between the window's largest disparity and
+            ``D_F``, relative to ``|D_F − D_B|`` (dimensionless), for ``others`` to count.
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -91,7 +111,7 @@ def boundary_matte(
     Raises:
         ValueError: on a non-2-D disparity, a guide of another ``(H, W)``, ``radius < 1`` or
             ``spatial_sigma <= 0``, or ``background`` / ``background_valid`` of another shape
-            or given without the other.
+            or given without the other, or ``others`` / ``other_weights`` likewise.
     """
     d = jnp.asarray(disparity)
     g = jnp.asarray(guide, d.dtype)
@@ -115,6 +135,20 @@ def boundary_matte(
                 f"background must have shape {g.shape} and background_valid {d.shape}; got "
                 f"{tuple(background.shape)} and {tuple(background_valid.shape)}"
             )
+    if (others is None) != (other_weights is None):
+        raise ValueError("others and other_weights must be given together")
+    if others is None:
+        g_all = g[None]
+    else:
+        others = jnp.asarray(others, d.dtype)
+        other_weights = jnp.asarray(other_weights, d.dtype)
+        K = others.shape[0] if others.ndim == 4 else -1
+        if others.shape != (K, *g.shape) or other_weights.shape != (K, H, W):
+            raise ValueError(
+                f"others must have shape (K, {H}, {W}, {g.shape[-1]}) and other_weights "
+                f"(K, {H}, {W}); got {tuple(others.shape)} and {tuple(other_weights.shape)}"
+            )
+        g_all = jnp.concatenate([g[None], others])
     lo, hi = _window_extrema(d, radius)
     band = (hi - lo) > jump
     lo1, hi1 = _window_extrema(d, 1)
@@ -125,9 +159,10 @@ def boundary_matte(
     C = g.shape[-1]
     # Channels as separate (H, W) planes: XLA's CPU backend runs the window loop ~25 %
     # faster on them than on (H, W, C) arrays with the channels innermost.
-    gc = [g[..., c] for c in range(C)]
+    # ``(1 + K, H, W)`` per channel: this view, then the others.
+    gc = [g_all[..., c] for c in range(C)]
     d_p = jnp.pad(d, r, mode="edge")
-    g_p = [jnp.pad(x, r, mode="edge") for x in gc]
+    g_p = [jnp.pad(x, ((0, 0), (r, r), (r, r)), mode="edge") for x in gc]
     p_p = jnp.pad(purity, r, mode="edge")
     zeros = jnp.zeros_like(d)
     wf = wb = df = db = zeros
@@ -150,26 +185,36 @@ def boundary_matte(
             wf, wb = wf + w_f, wb + w_b
             df, db = df + w_f * ds, db + w_b * ds
             for c in range(C):
-                gs = g_p[c][r + a : r + a + H, r + b : r + b + W]
+                gs = g_p[c][:, r + a : r + a + H, r + b : r + b + W]
                 cf[c] = cf[c] + w_f * gs
                 cb[c] = cb[c] + w_b * gs
     tiny = jnp.asarray(1e-12, d.dtype)
     F = [x / jnp.maximum(wf, tiny) for x in cf]
     B = [x / jnp.maximum(wb, tiny) for x in cb]
-    if background is not None:
-        B = [jnp.where(background_valid, background[..., c], B[c]) for c in range(C)]
+    if background is not None:  # this view's background only (index 0)
+        B = [
+            x.at[0].set(jnp.where(background_valid, background[..., c], x[0]))
+            for c, x in enumerate(B)
+        ]
     sep = [F[c] - B[c] for c in range(C)]
-    sep2 = sum(x * x for x in sep)
-    alpha = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep2, tiny)
+    sep_all = sum(x * x for x in sep)
+    alpha_all = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep_all, tiny)
+    sep2, alpha = sep_all[0], alpha_all[0]
+    sep, gc, B = [x[0] for x in sep], [x[0] for x in gc], [x[0] for x in B]
+    # Two-colour model test: the pixel's colour must lie near the line through B and F.
+    off_line = sum((gc[c] - B[c] - alpha * sep[c]) ** 2 for c in range(C))
+    d_f = df / jnp.maximum(wf, tiny)
+    d_b = db / jnp.maximum(wb, tiny)
+    if others is not None:
+        w = other_weights * (sep_all[1:] > min_separation**2)
+        mean = (alpha + jnp.sum(w * alpha_all[1:], axis=0)) / (1.0 + jnp.sum(w, axis=0))
+        aligned = jnp.abs(hi - d_f) <= align_tolerance * jnp.abs(d_f - d_b)
+        alpha = jnp.where(aligned, mean, alpha)
     # Near-ties (alpha ~ 1/2, e.g. an edge through the centre of a pixel) keep their value,
     # so that rounding differences cannot flip a decision.
     decide = band & (wf > 0) & (wb > 0) & (sep2 > min_separation**2) & (jnp.abs(alpha - 0.5) > 1e-3)
-    # Two-colour model test: the pixel's colour must lie near the line through B and F.
-    off_line = sum((gc[c] - B[c] - alpha * sep[c]) ** 2 for c in range(C))
     decide = decide & (off_line <= max_residual * sep2)
     is_fg = d > mid
-    d_f = df / jnp.maximum(wf, tiny)
-    d_b = db / jnp.maximum(wb, tiny)
     # A pixel only joins a side that one of its 8 neighbours is on: where three surfaces
     # meet, the mean background of the window can look like the foreground's colour.
     decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
@@ -178,6 +223,83 @@ def boundary_matte(
     side = jnp.where(alpha > 0.5, d_f, d_b)
     move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
     return jnp.where(decide & move, side, d)
+
+
+def near_surface_colours(
+    disparity: Float[ArrayLike, "H W"],
+    guides: Float[ArrayLike, "K H W C"],
+    offsets: Float[ArrayLike, "K 2"],
+    *,
+    radius: int = 2,
+    phase: float | Array = 0.5,
+) -> tuple[Float[Array, "K H W C"], Float[Array, "K H W"]]:
+    """Other views' colours where each pixel's nearest surface lies in them (the ``others``
+    of `boundary_matte`).
+
+    The nearest surface at pixel ``x`` of the view whose map is ``disparity`` has the
+    largest disparity ``h`` of the pixel's ``(2 radius + 1)²`` window; in the view
+    ``Δ = (dr, dc)`` view steps away it lies at ``x − h·Δ`` (the SPEC's sign). The sample is
+    that view's pixel nearest to this position, not an interpolation: a pixel a
+    depth edge crosses mixes the two surfaces by the share of its area each covers, and only
+    a whole pixel at the same position relative to the foreground edge has the same share.
+    Its weight falls with the distance ``φ`` (pixels, at most 1/2: the larger of the row and
+    column distances) between the pixel and the position: ``max(0, 1 − φ / phase)``;
+    samples whose position lies outside the frame weigh 0.
+
+    Not in the thesis; measurements in docs/ACCURACY.md ("Colour mixtures from several
+    views").
+
+    Args:
+        disparity: ``(H, W)`` float disparity of this view (pixels per view step).
+        guides: ``(K, H, W, C)`` float colours of ``K`` other views (those of the matte).
+        offsets: ``(K, 2)`` ``(dr, dc)`` of each other view relative to this view, in view
+            steps.
+        radius: window radius of the nearest surface (static int >= 1; the matte's).
+        phase: distance (pixels, > 0) at which a sample's weight reaches 0.
+
+    Returns:
+        ``(colours (K, H, W, C), weights (K, H, W))``. Not differentiable (a selection of
+        pixels; the weights carry no gradient).
+
+    Raises:
+        ValueError: on a non-2-D disparity, guides that are not ``(K, H, W, C)`` of the
+            disparity's ``(H, W)``, offsets that are not ``(K, 2)``, ``radius < 1`` or
+            ``phase <= 0``.
+    """
+    d = jnp.asarray(disparity)
+    g = jnp.asarray(guides)
+    offsets = jnp.asarray(offsets, d.dtype)
+    if d.ndim != 2:
+        raise ValueError(f"disparity must have shape (H, W); got {tuple(d.shape)}")
+    H, W = d.shape
+    if g.ndim != 4 or g.shape[1:3] != (H, W):
+        raise ValueError(f"guides must have shape (K, {H}, {W}, C); got {tuple(g.shape)}")
+    if offsets.shape != (g.shape[0], 2):
+        raise ValueError(f"offsets must have shape {(g.shape[0], 2)}; got {tuple(offsets.shape)}")
+    radius = int(radius)
+    if radius < 1:
+        raise ValueError(f"radius must be >= 1; got {radius}")
+    try:
+        concrete = float(phase)
+    except (TypeError, jax.errors.ConcretizationTypeError):  # traced: cannot check here
+        concrete = None
+    if concrete is not None and not concrete > 0:
+        raise ValueError(f"phase must be > 0; got {phase}")
+    h = lax.stop_gradient(_window_extrema(d, radius)[1])
+    ys = jnp.arange(H, dtype=d.dtype)[:, None]
+    xs = jnp.arange(W, dtype=d.dtype)[None, :]
+
+    def one(guide, off):
+        sy, sx = ys - off[0] * h, xs - off[1] * h
+        py, px = jnp.round(sy), jnp.round(sx)
+        dist = jnp.maximum(jnp.abs(sy - py), jnp.abs(sx - px))
+        inside = (py >= 0) & (py <= H - 1) & (px >= 0) & (px <= W - 1)
+        weight = jnp.where(inside, jnp.clip(1.0 - dist / phase, 0.0, 1.0), 0.0)
+        iy = jnp.clip(py, 0, H - 1).astype(jnp.int32)
+        ix = jnp.clip(px, 0, W - 1).astype(jnp.int32)
+        return guide[iy, ix], weight
+
+    return jax.vmap(one)(g, offsets)
 
 
 # Directions (row, column) along which `observed_background` looks for the background.

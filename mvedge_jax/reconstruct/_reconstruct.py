@@ -36,6 +36,7 @@ from ._matte import (
     background_samples,
     boundary_matte,
     largest_jumps,
+    near_surface_colours,
     pixel_subset,
     samples_to_frame,
     smooth_surface,
@@ -542,12 +543,15 @@ def _matte(
     jump: Array,
     snap: Array,
     background: tuple[Array, Array] | None = None,
+    others: tuple[Array, Array] | None = None,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
-    optionally an observed ``(background colour, valid)`` (`observed_background`)."""
+    optionally an observed ``(background colour, valid)`` (`observed_background`) and other
+    views' ``(colours, weights)`` (`near_surface_colours`)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
+    other, weight = (None, None) if others is None else others
     return boundary_matte(
         d,
         guide,
@@ -560,7 +564,36 @@ def _matte(
         snap=snap,
         background=colour,
         background_valid=valid,
+        others=other,
+        other_weights=weight,
+        align_tolerance=sc.matte_align_tolerance,
     )
+
+
+def _matte_others(centre: Array, views: Array, config: ReconstructConfig):
+    """The ``others`` of the centre map's matte: `near_surface_colours` of the cross-hair
+    views up to ``sharpen.matte_other_steps`` steps away (a view without an image weighs 0);
+    ``None`` at 0 steps."""
+    sc = config.sharpen
+    steps = sc.matte_other_steps
+    if steps == 0:
+        return None
+    U, V = views.shape[:2]
+    rc, cc = U // 2, V // 2
+    pos = _cross_hair_positions(U, V)
+    off = pos - np.array([rc, cc])
+    near = (np.abs(off).max(axis=1) <= steps) & (np.abs(off).max(axis=1) > 0)
+    pos, off = pos[near], off[near]
+    others = views[pos[:, 0], pos[:, 1]]
+    present = jnp.max(others, axis=(1, 2, 3)) > 0
+    colours, weights = near_surface_colours(
+        centre,
+        colour_guide(others, sc.matte_colour),
+        jnp.asarray(off, centre.dtype),
+        radius=sc.matte_radius,
+        phase=sc.matte_phase,
+    )
+    return colours, weights * present[:, None, None]
 
 
 def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, config) -> Array:
@@ -672,7 +705,14 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
         sharp = _refine(sharp, rc_j, cc_j, views, ch_views, ch_pos, config, sc.refine_iterations)
     if sc.matte:
         guide = colour_guide(views[rc, cc], sc.matte_colour)
-        sharp = _matte(sharp, guide, config, sc.matte_jump, sc.matte_snap)
+        sharp = _matte(
+            sharp,
+            guide,
+            config,
+            sc.matte_jump,
+            sc.matte_snap,
+            others=_matte_others(sharp, views, config),
+        )
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
         offsets = jnp.asarray(pos - np.array([rc, cc]), sharp.dtype)
@@ -729,7 +769,9 @@ def sharpen(
     plane sweep first lose their view-dependent shading (`shading_bias` estimated with
     ``centre_disparity``, `remove_shading`; not in the thesis).
     With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
-    its colour mixture says (not in the thesis: snapping cannot decide mixed pixels). With
+    its colour mixture says (not in the thesis: snapping cannot decide mixed pixels), in the
+    centre view and, with ``config.sharpen.matte_other_steps``, in the cross-hair views up to
+    that many steps away, at the pixel's nearest surface (`near_surface_colours`). With
     ``config.sharpen.sweep_steps``: every pixel is corrected by a local plane sweep of
     ``sweep_steps`` hypotheses within ``± sweep_search`` (`photo_sweep` against the
     cross-hair views at least ``sweep_min_offset`` steps away; not in the thesis: the

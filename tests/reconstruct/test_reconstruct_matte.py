@@ -9,7 +9,12 @@ import pytest
 from scipy.ndimage import grey_dilation, grey_erosion, minimum_filter
 
 from mvedge_jax.lightfield import linear_to_srgb, srgb_to_linear
-from mvedge_jax.reconstruct import SharpenConfig, boundary_matte, observed_background
+from mvedge_jax.reconstruct import (
+    SharpenConfig,
+    boundary_matte,
+    near_surface_colours,
+    observed_background,
+)
 from mvedge_jax.reconstruct._centre import colour_guide
 from mvedge_jax.reconstruct._matte import LIST_STEPS, largest_jumps, pixel_subset
 from mvedge_jax.synthetic import make_scene
@@ -394,3 +399,146 @@ def test_largest_jumps_keeps_the_list_for_the_largest_jumps():
     np.testing.assert_array_equal(
         np.asarray(largest_jumps(jnp.asarray(span), 0.5, 400)), span > 0.5
     )
+
+
+# A slanted depth edge between a flat red foreground (left) and a background whose texture
+# (periods of 2.7–4.1 px) changes the window means next to the edge from pixel to pixel.
+_MV_FG, _MV_BG, _MV_SIZE = 1.0, -1.3, 40
+
+
+def _mv_edge(y):
+    return 17.3 + 0.29 * y
+
+
+def _mv_view(k: int, seed: int, ss: int = 5) -> np.ndarray:
+    """View ``(0, k)`` of the scene, each pixel the mean of ``ss²`` samples: the foreground
+    edge moves by ``-_MV_FG k`` pixels, the background texture by ``-_MV_BG k``."""
+    rng = np.random.default_rng(seed)
+    s = (np.arange(ss) + 0.5) / ss - 0.5
+    y = np.arange(_MV_SIZE)[:, None, None, None] + s[None, None, :, None]
+    x = np.arange(_MV_SIZE)[None, :, None, None] + s[None, None, None, :]
+    fg = x < _mv_edge(y) - _MV_FG * k
+    xb = x + _MV_BG * k  # the background point's position in the centre view
+    phase = rng.uniform(0, 2 * np.pi, 3)
+    tex = np.stack(
+        [
+            0.45 + 0.3 * np.sin(2 * np.pi * xb / p + f + 0.8 * y)
+            for p, f in zip((2.7, 3.4, 4.1), phase, strict=True)
+        ],
+        axis=-1,
+    )
+    colour = np.where(fg[..., None], np.array([0.9, 0.15, 0.1]), tex)
+    return colour.mean(axis=(2, 3)).astype(np.float32)
+
+
+def test_matte_with_other_views_averages_out_the_background_texture():
+    y, x = np.mgrid[:_MV_SIZE, :_MV_SIZE]
+    gt = jnp.asarray(np.where(x < _mv_edge(y), _MV_FG, _MV_BG).astype(np.float32))
+    ks = [k for k in range(-4, 5) if k]
+    offsets = jnp.asarray([(0, k) for k in ks], jnp.float32)
+    alone = with_others = 0
+    for seed in range(5):
+        guide = jnp.asarray(_mv_view(0, seed))
+        colours, weights = near_surface_colours(
+            gt, jnp.asarray(np.stack([_mv_view(k, seed) for k in ks])), offsets
+        )
+        alone += int((np.asarray(boundary_matte(gt, guide)) != gt).sum())
+        out = jax.jit(boundary_matte)(gt, guide, others=colours, other_weights=weights)
+        with_others += int((np.asarray(out) != gt).sum())
+    # The centre view alone moves 35 pixels of the ground truth (5–10 per seed) to the
+    # wrong side; with the eight other views of the row, 2.
+    assert alone >= 20, alone
+    assert with_others <= 4, with_others
+
+
+def test_matte_with_other_views_weighted_zero_is_the_matte_alone():
+    gt, img = _edge_scene(10.45)
+    d = jnp.asarray(np.roll(gt, 1, axis=1))
+    rng = np.random.default_rng(0)
+    others = jnp.asarray(rng.uniform(0, 1, (3, *img.shape)).astype(np.float32))
+    zero = jnp.zeros((3, *gt.shape), jnp.float32)
+    np.testing.assert_array_equal(
+        np.asarray(boundary_matte(d, img, others=others, other_weights=zero)),
+        np.asarray(boundary_matte(d, img)),
+    )
+
+
+def test_matte_follows_the_other_views_only_where_the_window_holds_two_surfaces():
+    gt, img = _edge_scene(10.3)  # column 10: foreground; 11: background
+    d = jnp.asarray(gt)
+    # Other views that see column 11 in the pure foreground colour outvote the pixel's own
+    # colour and pull it to the foreground.
+    fg = img.copy()
+    fg[:, 11] = img[:, 0]
+    others = jnp.asarray(np.stack([fg] * 4))
+    weights = jnp.ones((4, *gt.shape), jnp.float32)
+    out = np.asarray(boundary_matte(d, img, others=others, other_weights=weights))
+    assert np.all(out[:, 11] == FG) and np.all(out[:, 12] == BG)
+    # The same where a nearer surface lies in the window (its largest disparity is not the
+    # foreground side's): the other views do not count, as with a negative tolerance.
+    for kw in ({"align_tolerance": -1.0}, {}):
+        near = np.asarray(gt).copy()
+        if not kw:
+            near[:, 13] = 3.0  # a third, nearer surface two columns from column 11
+        out = np.asarray(
+            boundary_matte(jnp.asarray(near), img, others=others, other_weights=weights, **kw)
+        )
+        np.testing.assert_array_equal(out[:, 11], near[:, 11])
+    # ... and without the tolerance they would have pulled it there too.
+    out = boundary_matte(
+        jnp.asarray(near), img, others=others, other_weights=weights, align_tolerance=1e9
+    )
+    assert np.all(np.asarray(out)[:, 11] > 1.0)
+
+
+def test_near_surface_colours_sample_the_nearest_surface_in_each_view():
+    rng = np.random.default_rng(1)
+    H, W = 12, 16
+    guides = jnp.asarray(rng.uniform(0, 1, (3, H, W, 3)).astype(np.float32))
+    d = np.full((H, W), -1.0, np.float32)
+    d[:, 8:] = 2.0  # a near surface from column 8; its window maximum reaches column 6
+    offsets = jnp.asarray([(0, 1), (-1, 0), (0, -2)], jnp.float32)
+    colours, weights = jax.jit(near_surface_colours)(jnp.asarray(d), guides, offsets)
+    h = np.where(np.arange(W) >= 6, 2.0, -1.0)  # the window maximum (radius 2) per column
+    ys, xs = np.mgrid[:H, :W]
+    for k, (dr, dc) in enumerate(np.asarray(offsets)):
+        sy, sx = (ys - dr * h).astype(int), (xs - dc * h).astype(int)
+        inside = (sy >= 0) & (sy < H) & (sx >= 0) & (sx < W)
+        np.testing.assert_array_equal(np.asarray(weights[k]), inside.astype(np.float32))
+        g = np.asarray(guides[k])
+        np.testing.assert_array_equal(np.asarray(colours[k])[inside], g[sy[inside], sx[inside]])
+
+
+@pytest.mark.parametrize(("value", "weight"), [(0.25, 0.5), (0.1, 0.8), (0.5, 0.0), (0.4, 0.2)])
+def test_near_surface_colours_weigh_the_distance_to_the_pixel(value, weight):
+    d = jnp.full((8, 8), value, jnp.float32)  # lands value px from a pixel centre (< 1/2)
+    guides = jnp.ones((1, 8, 8, 3), jnp.float32)
+    _, w = near_surface_colours(d, guides, jnp.asarray([[0.0, 1.0]]), phase=0.5)
+    np.testing.assert_allclose(np.asarray(w)[0, :, 1:], weight, atol=1e-6)
+    _, w = near_surface_colours(d, guides, jnp.asarray([[0.0, 1.0]]), phase=1.0)
+    np.testing.assert_allclose(np.asarray(w)[0, :, 1:], 1 - 0.5 * (1 - weight), atol=1e-6)
+
+
+def test_near_surface_colours_and_others_reject_bad_input():
+    gt, img = _edge_scene(10.3)
+    others = jnp.zeros((2, *img.shape), jnp.float32)
+    weights = jnp.ones((2, *gt.shape), jnp.float32)
+    with pytest.raises(ValueError, match="given together"):
+        boundary_matte(gt, img, others=others)
+    with pytest.raises(ValueError, match="others must have shape"):
+        boundary_matte(gt, img, others=others[:, :5], other_weights=weights)
+    with pytest.raises(ValueError, match="others must have shape"):
+        boundary_matte(gt, img, others=others, other_weights=weights[:1])
+    off = jnp.zeros((2, 2), jnp.float32)
+    with pytest.raises(ValueError, match="disparity must have shape"):
+        near_surface_colours(gt[0], others, off)
+    with pytest.raises(ValueError, match="guides must have shape"):
+        near_surface_colours(gt, others[0], off)
+    with pytest.raises(ValueError, match="offsets must have shape"):
+        near_surface_colours(gt, others, off[:1])
+    with pytest.raises(ValueError, match="radius"):
+        near_surface_colours(gt, others, off, radius=0)
+    with pytest.raises(ValueError, match="phase"):
+        near_surface_colours(gt, others, off, phase=0.0)
+    with pytest.raises(ValueError, match="matte_phase"):
+        SharpenConfig(matte_phase=0.0)
