@@ -542,3 +542,64 @@ def test_near_surface_colours_and_others_reject_bad_input():
         near_surface_colours(gt, others, off, phase=0.0)
     with pytest.raises(ValueError, match="matte_phase"):
         SharpenConfig(matte_phase=0.0)
+
+
+def test_near_surface_colours_weigh_the_larger_of_the_row_and_column_distances():
+    d = jnp.full((8, 8), 0.2, jnp.float32)  # lands 0.2 px from a pixel along both axes
+    guides = jnp.ones((1, 8, 8, 3), jnp.float32)
+    _, w = near_surface_colours(d, guides, jnp.asarray([[1.0, 1.0]]), phase=0.5)
+    np.testing.assert_allclose(np.asarray(w)[0, 1:, 1:], 1 - 0.2 / 0.5, atol=1e-6)
+
+
+def _matte_with_others_scene():
+    """The edge scene of `_edge_scene`, the map one column fattened, and four other views
+    whose column 11 shows the pure foreground colour (they pull it to the foreground)."""
+    gt, img = _edge_scene(10.3)
+    fg = img.copy()
+    fg[:, 11] = img[:, 0]
+    return gt, img, jnp.asarray(np.stack([fg] * 4)), jnp.ones((4, *gt.shape), jnp.float32)
+
+
+def test_matte_tests_the_two_colour_model_on_the_pixels_own_colour():
+    # Column 11's own colour lies on the line through B and F (α 0.2) and passes the
+    # two-colour test; the other views then move it to the foreground (α 0.84 together).
+    # Tested with that combined α, the colour would lie off the line and stay.
+    gt, img, others, weights = _matte_with_others_scene()
+    fg, bg = img[0, 0], img[0, -1]
+    img = img.copy()
+    img[:, 11] = bg + 0.2 * (fg - bg)
+    args = (jnp.asarray(gt), jnp.asarray(img))
+    out = boundary_matte(*args, others=others, other_weights=weights, max_residual=0.05)
+    assert np.all(np.asarray(out)[:, 11] == FG)
+    alone = boundary_matte(*args, max_residual=0.05)
+    np.testing.assert_array_equal(np.asarray(alone)[:, 11], gt[:, 11])
+
+
+def test_matte_ignores_other_views_whose_two_sides_look_alike():
+    gt, img, others, weights = _matte_with_others_scene()
+    # One grey: each other view's α would be 0 and pull column 10 (α 0.8) to the background.
+    flat = jnp.full_like(others, 0.5)
+    out = boundary_matte(jnp.asarray(gt), img, others=flat, other_weights=weights)
+    np.testing.assert_array_equal(np.asarray(out), np.asarray(boundary_matte(jnp.asarray(gt), img)))
+
+
+def test_matte_takes_the_observed_background_for_its_own_colour_only():
+    # Column 11 is background; its colour is 30 % foreground. An observed background far
+    # beyond the background colour, away from the foreground, makes its own α 0.825 (it
+    # joins the foreground alone); four other views that see it as pure background (α ≈ 0
+    # with their window means) hold it back. Were the observed background taken for their
+    # B too, their α would be 0.75 and it would join the foreground.
+    gt, img = _edge_scene(10.3)
+    fg, bg = img[0, 0], img[0, -1]
+    own = img.copy()
+    own[:, 11] = bg + 0.3 * (fg - bg)
+    observed = jnp.asarray(np.broadcast_to(bg - 3.0 * (fg - bg), img.shape).copy())
+    valid = jnp.zeros(gt.shape, bool).at[:, 11].set(True)
+    d = jnp.asarray(gt)
+    kw = {"background": observed, "background_valid": valid}
+    alone = boundary_matte(d, jnp.asarray(own), **kw)
+    assert np.all(np.asarray(alone)[:, 11] == FG)
+    others = jnp.asarray(np.stack([img] * 4))
+    weights = jnp.ones((4, *gt.shape), jnp.float32)
+    out = boundary_matte(d, jnp.asarray(own), others=others, other_weights=weights, **kw)
+    np.testing.assert_array_equal(np.asarray(out)[:, 11], gt[:, 11])

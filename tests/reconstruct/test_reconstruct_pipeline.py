@@ -14,9 +14,11 @@ from mvedge_jax.reconstruct import (
     ReconstructConfig,
     Reconstruction,
     SharpenConfig,
+    near_surface_colours,
     reconstruct,
 )
-from mvedge_jax.reconstruct._reconstruct import _matte_others
+from mvedge_jax.reconstruct._centre import colour_guide
+from mvedge_jax.reconstruct._reconstruct import _matte, _matte_others
 
 
 def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
@@ -278,3 +280,36 @@ def test_centre_matte_gives_missing_views_no_weight(small_scene):
         )
         is None
     )
+
+
+def test_centre_matte_others_follow_the_config(small_scene):
+    lf, _, _ = small_scene
+    centre = jnp.asarray(lf.centre_gt)
+    sc = SharpenConfig(matte_other_steps=1, matte_phase=0.3, matte_radius=3)
+    colours, weights = _matte_others(centre, lf.views, ReconstructConfig(sharpen=sc))
+    # The four views one step from the centre, in cross-hair order, with the config's
+    # window radius and phase.
+    pos = np.asarray([(2, 1), (2, 3), (1, 2), (3, 2)])
+    expected = near_surface_colours(
+        centre,
+        colour_guide(lf.views[pos[:, 0], pos[:, 1]], sc.matte_colour),
+        jnp.asarray(pos - 2, jnp.float32),
+        radius=3,
+        phase=0.3,
+    )
+    np.testing.assert_array_equal(np.asarray(colours), np.asarray(expected[0]))
+    np.testing.assert_array_equal(np.asarray(weights), np.asarray(expected[1]))
+    two = _matte_others(
+        centre, lf.views, ReconstructConfig(sharpen=SharpenConfig(matte_other_steps=2))
+    )
+    assert two[0].shape[0] == 8
+    # The alignment tolerance reaches the matte.
+    guide = colour_guide(lf.centre_view, "linear")
+    cfg = ReconstructConfig()
+    others = _matte_others(centre, lf.views, cfg)
+
+    def matte(tolerance):
+        c = ReconstructConfig(sharpen=SharpenConfig(matte_align_tolerance=tolerance))
+        return np.asarray(_matte(centre, guide, c, 0.2, 1e9, others=others))
+
+    assert not np.array_equal(matte(0.0), matte(1e9))
