@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.ndimage import grey_dilation
 
 from mvedge_jax.reconstruct import (
     CentreConfig,
@@ -16,9 +17,15 @@ from mvedge_jax.reconstruct import (
     SharpenConfig,
     near_surface_colours,
     reconstruct,
+    sharpen,
 )
 from mvedge_jax.reconstruct._centre import colour_guide
-from mvedge_jax.reconstruct._reconstruct import _matte, _matte_others
+from mvedge_jax.reconstruct._reconstruct import (
+    _cross_hair_views,
+    _matte,
+    _matte_others,
+    _refine,
+)
 
 
 def _per_view_mse(rec: Reconstruction, lf) -> np.ndarray:
@@ -313,3 +320,29 @@ def test_centre_matte_others_follow_the_config(small_scene):
         return np.asarray(_matte(centre, guide, c, 0.2, 1e9, others=others))
 
     assert not np.array_equal(matte(0.0), matte(1e9))
+
+
+def test_centre_matte_samples_the_other_views_at_the_snapped_map(small_scene):
+    # The other views are sampled at the nearest surface of the map the matte receives
+    # (after the snapping), not of the map entering the sharpening.
+    lf, _, _ = small_scene
+    sc = SharpenConfig(enabled=False, sweep_steps=0, shading_sigma=0.0)
+    config = ReconstructConfig(sharpen=sc)
+    gt = jnp.asarray(lf.centre_gt)
+    entering = jnp.asarray(grey_dilation(np.asarray(gt), size=(3, 3)))  # fattened by a pixel
+    ch_views, ch_pos = _cross_hair_views(lf.views)
+    c = jnp.int32(2)
+    snapped = _refine(entering, c, c, lf.views, ch_views, ch_pos, config, sc.refine_iterations)
+    guide = colour_guide(lf.centre_view, sc.matte_colour)
+    out = np.asarray(sharpen(lf.views, entering, config))
+
+    def matte(at):
+        others = _matte_others(at, lf.views, config)
+        return np.asarray(
+            _matte(snapped, guide, config, sc.matte_jump, sc.matte_snap, others=others)
+        )
+
+    # Equal up to rounding (the jitted chain fuses differently); sampled at the map entering
+    # the sharpening, whole pixels change sides.
+    np.testing.assert_allclose(out, matte(snapped), atol=1e-5)
+    assert np.abs(out - matte(entering)).max() > 0.5
