@@ -255,11 +255,18 @@ def near_surface_colours(
         offsets: ``(K, 2)`` ``(dr, dc)`` of each other view relative to this view, in view
             steps.
         radius: window radius of the nearest surface (static int >= 1; the matte's).
-        phase: distance (pixels, > 0) at which a sample's weight reaches 0.
+        phase: distance (pixels, > 0; a scalar, may be traced, then unchecked) at which a
+            sample's weight reaches 0.
+
+    The nearest surface is taken per pixel, so across a matte window it is one value only
+    where one foreground lies within ``radius`` of every window pixel; a window pixel farther
+    from the foreground is sampled at its own surface, which in views where the foreground
+    moves over it can be the foreground (docs/ACCURACY.md).
 
     Returns:
-        ``(colours (K, H, W, C), weights (K, H, W))``. Not differentiable (a selection of
-        pixels; the weights carry no gradient).
+        ``(colours (K, H, W, C), weights (K, H, W))``: the colours in the guides' dtype, the
+        weights in the disparity's. Not differentiable (a selection of pixels; the weights
+        carry no gradient).
 
     Raises:
         ValueError: on a non-2-D disparity, guides that are not ``(K, H, W, C)`` of the

@@ -769,9 +769,10 @@ def sharpen(
     plane sweep first lose their view-dependent shading (`shading_bias` estimated with
     ``centre_disparity``, `remove_shading`; not in the thesis).
     With ``config.sharpen.matte``: `boundary_matte` puts every pixel on a discontinuity on the side
-    its colour mixture says (not in the thesis: snapping cannot decide mixed pixels), in the
-    centre view and, with ``config.sharpen.matte_other_steps``, in the cross-hair views up to
-    that many steps away, at the pixel's nearest surface (`near_surface_colours`). With
+    its colour mixture says (not in the thesis: snapping cannot decide mixed pixels); with
+    ``config.sharpen.matte_other_steps`` the mixture is read in the cross-hair views up to
+    that many steps away too, at the pixel's nearest surface (`near_surface_colours`; only
+    the centre map is matted here). With
     ``config.sharpen.sweep_steps``: every pixel is corrected by a local plane sweep of
     ``sweep_steps`` hypotheses within ``± sweep_search`` (`photo_sweep` against the
     cross-hair views at least ``sweep_min_offset`` steps away; not in the thesis: the

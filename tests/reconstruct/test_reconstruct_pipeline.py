@@ -266,7 +266,7 @@ def test_centre_matte_takes_the_other_views(small_scene):
     before = 100 * np.mean((np.asarray(alone.centre_sharp) - gt) ** 2)
     after = 100 * np.mean((np.asarray(default.centre_sharp) - gt) ** 2)
     assert after < before, (before, after)
-    # Only the views up to `matte_other_steps` steps away count (here 2 of the 4 of each
+    # Only the views up to `matte_other_steps` steps away count (here 1 of the 2 of each
     # direction on this 5x5 grid).
     near = run(matte_other_steps=1)
     assert not np.array_equal(near.centre_sharp, default.centre_sharp)
