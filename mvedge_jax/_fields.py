@@ -227,6 +227,18 @@ def check_value(where: str, value: Any, spec: FieldSpec) -> None:
     raise AssertionError(f"unknown field kind {spec.kind!r}")  # pragma: no cover
 
 
+def check_lower_bound(name: str, value: Any, lower: float, *, open_: bool = False) -> None:
+    """Raise a ``ValueError`` naming ``name`` where a concrete scalar function argument is not
+    ``>= lower`` (``> lower`` with ``open_``); NaN fails. Traced values (inside ``jit`` or
+    ``vmap``) and non-scalars are not checked here (configs: `check_fields`)."""
+    try:
+        v = float(value)
+    except (TypeError, jax.errors.ConcretizationTypeError):
+        return
+    if not (v > lower if open_ else v >= lower):
+        raise ValueError(f"{name} must be {'>' if open_ else '>='} {lower:g}; got {value}")
+
+
 def check_fields(config: eqx.Module) -> None:
     """Validate every field declared with `hyperparameter` or `static` (call it from the
     config's ``__check_init__``). Fields declared otherwise (nested configs) are checked to

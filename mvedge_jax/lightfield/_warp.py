@@ -17,6 +17,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._fields import check_lower_bound
+
 
 def _check_offset(offset) -> tuple[Array, Array]:
     off = jnp.asarray(offset)
@@ -304,12 +306,7 @@ def forward_project_views(
 
 
 def _check_crack_parallax(crack_parallax) -> None:
-    try:
-        concrete = float(crack_parallax)
-    except (TypeError, jax.errors.ConcretizationTypeError):  # traced: cannot check here
-        concrete = None
-    if concrete is not None and not concrete >= 0:
-        raise ValueError(f"crack_parallax must be >= 0; got {crack_parallax}")
+    check_lower_bound("crack_parallax", crack_parallax, 0.0)
 
 
 @functools.partial(jax.jit, static_argnames=("fill_cracks",))

@@ -8,6 +8,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
+from .._fields import check_lower_bound
 from ._photo import _window_extrema
 
 
@@ -286,12 +287,7 @@ def near_surface_colours(
     radius = int(radius)
     if radius < 1:
         raise ValueError(f"radius must be >= 1; got {radius}")
-    try:
-        concrete = float(phase)
-    except (TypeError, jax.errors.ConcretizationTypeError):  # traced: cannot check here
-        concrete = None
-    if concrete is not None and not concrete > 0:
-        raise ValueError(f"phase must be > 0; got {phase}")
+    check_lower_bound("phase", phase, 0.0, open_=True)
     h = lax.stop_gradient(_window_extrema(d, radius)[1])
     ys = jnp.arange(H, dtype=d.dtype)[:, None]
     xs = jnp.arange(W, dtype=d.dtype)[None, :]

@@ -13,6 +13,7 @@ import numpy as np
 from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._fields import check_lower_bound
 from .._jit import filter_jit_bound
 from ..edges import EdgeSet
 from ..lightfield import forward_project
@@ -268,8 +269,7 @@ def colour_fill(
             f"valid must have shape {values.shape} and guide {values.shape + ('C',)}; got "
             f"{tuple(valid.shape)} and {tuple(guide.shape)}"
         )
-    if isinstance(margin, (int, float)) and not margin >= 0:
-        raise ValueError(f"margin must be >= 0; got {margin}")
+    check_lower_bound("margin", margin, 0.0)
     big = jnp.asarray(jnp.inf, values.dtype)
     # The guide's channels as separate (H, W) planes: gathers and arithmetic on them run
     # ~5 % faster on XLA's CPU backend than on (H, W, C) with the channels innermost.
@@ -358,8 +358,7 @@ def fill_beyond_frame(
         raise ValueError(f"valid must have shape {filled.shape}; got {tuple(valid.shape)}")
     if offset.shape != (2,):
         raise ValueError(f"offset must have shape (2,); got {tuple(offset.shape)}")
-    if isinstance(margin, (int, float)) and not margin >= 0:
-        raise ValueError(f"margin must be >= 0; got {margin}")
+    check_lower_bound("margin", margin, 0.0)
     H, W = filled.shape
     big = jnp.asarray(jnp.inf, filled.dtype)
     hole = ~valid
