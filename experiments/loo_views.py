@@ -4,7 +4,7 @@
         [--criterion mse|mse+badpix] [--json OUT]
 
 ``PATH`` is a field of `PipelineConfig` by dotted path: an array field (`hyperparameter_paths`,
-e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer, boolean (``true``,
+e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer, float, boolean (``true``,
 ``false``) or string field (e.g. ``reconstruct.sharpen.matte_view_steps``,
 ``reconstruct.epi.hole_value``; one compilation per value); ``V0`` is the reference
 value (normally the current default), against which the others are compared. For every
@@ -129,12 +129,14 @@ def main(argv=None) -> int:
             values = [v == "true" for v in raw]
         elif isinstance(current, int):
             values = [int(v) for v in raw]
+        elif isinstance(current, float):
+            values = [float(v) for v in raw]
         elif isinstance(current, str):
             values = raw
         else:
             ap.error(
                 f"{args.path!r} is neither an array field of PipelineConfig (see "
-                "hyperparameter_paths) nor a static integer, boolean or string field"
+                "hyperparameter_paths) nor a static integer, float, boolean or string field"
             )
     scenes = [s.strip() for s in args.scenes.split(",")]
     unknown = [s for s in scenes if s not in SCENES]

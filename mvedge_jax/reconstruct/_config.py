@@ -195,6 +195,13 @@ class SharpenConfig(eqx.Module):
             from the cross-hair views up to this many steps away too, sampled at the
             pixel's nearest surface (`boundary_matte`'s ``others``, `near_surface_colours`;
             not in the thesis); 0: from the centre view alone.
+        matte_foreground_fit, matte_background_fit: `boundary_matte`'s ``foreground_fit``
+            and ``background_fit`` for the centre map's matte: the side's colour at the
+            pixel is a linear fit of its colours over the window, whose gradient is held
+            back by a ridge of the inverse of this (1 / (weight units × pixels²)); 0: their
+            mean (not in the thesis).
+        matte_view_foreground_fit, matte_view_background_fit: the same for the maps of the
+            other views (``matte_views``).
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
         matte_colour: the colours of its two-colour mixture model: ``"linear"`` (sRGB
@@ -253,6 +260,10 @@ class SharpenConfig(eqx.Module):
     matte_views: bool = static(True)
     matte_view_steps: int = static(4, lower=0, upper=64)
     matte_other_steps: int = static(4, lower=0, upper=64)
+    matte_foreground_fit: float = static(0.0, lower=0.0)
+    matte_background_fit: float = static(0.0, lower=0.0)
+    matte_view_foreground_fit: float = static(1.0, lower=0.0)
+    matte_view_background_fit: float = static(0.0, lower=0.0)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
     matte_colour: str = static("linear", choices=MATTE_COLOURS)

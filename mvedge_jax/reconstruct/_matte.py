@@ -28,6 +28,8 @@ def boundary_matte(
     others: Float[ArrayLike, "K H W C"] | None = None,
     other_weights: Float[ArrayLike, "K H W"] | None = None,
     align_tolerance: float | Array = 0.1,
+    foreground_fit: float = 0.0,
+    background_fit: float = 0.0,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -72,6 +74,15 @@ def boundary_matte(
     ``align_tolerance · |D_F − D_B|`` of ``D_F`` (two surfaces: with a third, nearer one in
     the window, the samples follow that one).
 
+    With ``foreground_fit`` / ``background_fit`` above 0, that side's colour is not the
+    weighted mean of its window pixels but the value at the pixel of their weighted
+    least-squares linear fit ``c(o) = m + g·o`` over the window offsets ``o`` (pixels), with
+    the ridge ``|g|² / fit`` (weight units × pixels²) holding the gradient back: the side's
+    pixels all lie on one side of the pixel, so the mean is the colour about a pixel away,
+    and a colour gradient across the edge (shading, the texture's low frequencies) biases
+    it; the fit reads it at the pixel itself. Larger values follow the gradient more
+    closely; 0 is the mean. With ``others``, every view's sides are fitted alike.
+
     One pass; jit/vmap-able. Not differentiable in the side chosen (a selection); the output
     is piecewise a weighted mean of the input.
 
@@ -105,6 +116,9 @@ def boundary_matte(
         other_weights: ``(K, H, W)`` weights in [0, 1] of ``others`` (with ``others``).
         align_tolerance: largest difference between the window's largest disparity and
             ``D_F``, relative to ``|D_F − D_B|`` (dimensionless), for ``others`` to count.
+        foreground_fit, background_fit: strength of the linear fit of the foreground /
+            background side's colours (static float, finite, >= 0; the inverse of the ridge
+            on the fit's gradient, 1 / (weight units × pixels²)); 0: the side's mean.
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -112,7 +126,8 @@ def boundary_matte(
     Raises:
         ValueError: on a non-2-D disparity, a guide of another ``(H, W)``, ``radius < 1`` or
             ``spatial_sigma <= 0``, or ``background`` / ``background_valid`` of another shape
-            or given without the other, or ``others`` / ``other_weights`` likewise.
+            or given without the other, or ``others`` / ``other_weights`` likewise, or a
+            fit strength that is negative or not finite.
     """
     d = jnp.asarray(disparity)
     g = jnp.asarray(guide, d.dtype)
@@ -125,6 +140,11 @@ def boundary_matte(
         raise ValueError(f"radius must be >= 1; got {radius}")
     if not spatial_sigma > 0:
         raise ValueError(f"spatial_sigma must be > 0; got {spatial_sigma}")
+    fits = {"foreground_fit": foreground_fit, "background_fit": background_fit}
+    for name, value in fits.items():
+        if not 0 <= float(value) < float("inf"):
+            raise ValueError(f"{name} must be finite and >= 0 (0: the window mean); got {value}")
+    fit_f, fit_b = (float(v) > 0 for v in fits.values())
     H, W = d.shape
     if (background is None) != (background_valid is None):
         raise ValueError("background and background_valid must be given together")
@@ -169,6 +189,11 @@ def boundary_matte(
     wf = wb = df = db = zeros
     cf = [zeros] * C
     cb = [zeros] * C
+    # Moments of the two sides' weights over the window offsets (a, b) and their colours'
+    # first moments, for the linear fits (``foreground_fit``, ``background_fit``).
+    moments = {side: [zeros] * 5 for side in "fb"}  # Σw a, Σw b, Σw a², Σw b², Σw a b
+    colour_moments = {side: ([zeros] * C, [zeros] * C) for side in "fb"}  # Σw a c, Σw b c
+    fitted = {"f": fit_f, "b": fit_b}
     # Static unrolled loop over the window offsets: XLA fuses it into one pass.
     for a in range(-r, r + 1):
         for b in range(-r, r + 1):
@@ -185,13 +210,31 @@ def boundary_matte(
             w_b = jnp.where(fg, 0.0, w)
             wf, wb = wf + w_f, wb + w_b
             df, db = df + w_f * ds, db + w_b * ds
+            for side, w_s in (("f", w_f), ("b", w_b)):
+                if fitted[side]:
+                    m = moments[side]
+                    terms = (a * w_s, b * w_s, (a * a) * w_s, (b * b) * w_s, (a * b) * w_s)
+                    moments[side] = [x + t for x, t in zip(m, terms, strict=True)]
             for c in range(C):
                 gs = g_p[c][:, r + a : r + a + H, r + b : r + b + W]
                 cf[c] = cf[c] + w_f * gs
                 cb[c] = cb[c] + w_b * gs
+                for side, w_s in (("f", w_f), ("b", w_b)):
+                    if fitted[side]:
+                        ca, cb_ = colour_moments[side]
+                        ca[c] = ca[c] + (a * w_s) * gs
+                        cb_[c] = cb_[c] + (b * w_s) * gs
     tiny = jnp.asarray(1e-12, d.dtype)
-    F = [x / jnp.maximum(wf, tiny) for x in cf]
-    B = [x / jnp.maximum(wb, tiny) for x in cb]
+    F = (
+        _fit_at_pixel(wf, cf, moments["f"], colour_moments["f"], 1.0 / float(foreground_fit))
+        if fit_f
+        else [x / jnp.maximum(wf, tiny) for x in cf]
+    )
+    B = (
+        _fit_at_pixel(wb, cb, moments["b"], colour_moments["b"], 1.0 / float(background_fit))
+        if fit_b
+        else [x / jnp.maximum(wb, tiny) for x in cb]
+    )
     if background is not None:  # this view's background only (index 0)
         B = [
             x.at[0].set(jnp.where(background_valid, background[..., c], x[0]))
@@ -224,6 +267,27 @@ def boundary_matte(
     side = jnp.where(alpha > 0.5, d_f, d_b)
     move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
     return jnp.where(decide & move, side, d)
+
+
+def _fit_at_pixel(
+    w0: Array, c0: list[Array], moments: list[Array], colour_moments, ridge: float
+) -> list[Array]:
+    """Per channel, the value at the window centre of the weighted least-squares fit
+    ``c(o) = m + g·o`` of one side's colours over the window offsets ``o = (a, b)``, with
+    ``ridge · |g|²`` added (pixels² in weight units): ``m``, the first component of
+    ``M⁻¹ (Σw c, Σw a c, Σw b c)``, ``M`` the side's ``3 × 3`` moment matrix plus the ridge.
+    ``M`` is positive definite wherever the side has weight (``det M ≥ Σw · ridge²``), so
+    the first row of its inverse comes from its cofactors; a side without weight gets 0."""
+    sa, sb, saa, sbb, sab = moments
+    saa, sbb = saa + ridge, sbb + ridge
+    c00 = saa * sbb - sab * sab
+    c01 = sab * sb - sa * sbb
+    c02 = sa * sab - saa * sb
+    det = w0 * c00 + sa * c01 + sb * c02
+    inv = 1.0 / jnp.maximum(det, jnp.asarray(1e-12, w0.dtype))
+    r0, r1, r2 = c00 * inv, c01 * inv, c02 * inv
+    ca, cb = colour_moments
+    return [r0 * c0[c] + r1 * ca[c] + r2 * cb[c] for c in range(len(c0))]
 
 
 def near_surface_colours(

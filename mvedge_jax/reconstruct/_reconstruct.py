@@ -543,11 +543,13 @@ def _matte(
     snap: Array,
     background: tuple[Array, Array] | None = None,
     others: tuple[Array, Array] | None = None,
+    fits: tuple[float, float] = (0.0, 0.0),
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
     optionally an observed ``(background colour, valid)`` (`observed_background`) and other
-    views' ``(colours, weights)`` (`near_surface_colours`)."""
+    views' ``(colours, weights)`` (`near_surface_colours`), and the ``(foreground,
+    background)`` strengths of the sides' colour fits (``*_fit``)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     other, weight = (None, None) if others is None else others
@@ -566,6 +568,8 @@ def _matte(
         others=other,
         other_weights=weight,
         align_tolerance=sc.matte_align_tolerance,
+        foreground_fit=fits[0],
+        background_fit=fits[1],
     )
 
 
@@ -605,12 +609,14 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     r_j, c_j = (jnp.asarray(i, jnp.int32) for i in others)
     same = sc.matte_colour == config.colour_space
     jump, snap = sc.matte_view_jump, sc.matte_view_snap
+    fits = (sc.matte_view_foreground_fit, sc.matte_view_background_fit)
     if sc.matte_view_steps == 0:
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         matted = lax.map(
-            lambda pair: _matte(pair[0], pair[1], config, jump, snap), (disparity[r_j, c_j], own)
+            lambda pair: _matte(pair[0], pair[1], config, jump, snap, fits=fits),
+            (disparity[r_j, c_j], own),
         )
         return disparity.at[r_j, c_j].set(matted)
     # The samples come from every view, the centre included.
@@ -648,7 +654,8 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
 
     def one(args):
         d, guide, f, col, ok = args
-        return _matte(d, guide, config, jump, snap, samples_to_frame(f, col, ok, (H, W)))
+        background = samples_to_frame(f, col, ok, (H, W))
+        return _matte(d, guide, config, jump, snap, background, fits=fits)
 
     matted = lax.map(one, (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid))
     return disparity.at[r_j, c_j].set(matted)
@@ -711,6 +718,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             sc.matte_jump,
             sc.matte_snap,
             others=_matte_others(sharp, views, config),
+            fits=(sc.matte_foreground_fit, sc.matte_background_fit),
         )
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)
@@ -1048,7 +1056,9 @@ def propagate(
        (reprojected boundaries are only pixel-accurate), discontinuities marked by
        ``sharpen.matte_view_jump``; with ``sharpen.matte_view_steps > 0`` its background
        colour is, where other views see it, the background surface behind the pixel itself
-       (`observed_background`) instead of the window mean.
+       (`observed_background`) instead of the window mean; its sides' colours are linear
+       fits read at the pixel (``sharpen.matte_view_foreground_fit``,
+       ``matte_view_background_fit``; 0: the means).
 
     The centre view's output is the mean of its two inpainted versions (row and column), so
     it is not ``centre_disparity`` itself. Fed the ``centre_sharp`` of a `reconstruct` call

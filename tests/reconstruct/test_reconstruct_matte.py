@@ -603,3 +603,61 @@ def test_matte_takes_the_observed_background_for_its_own_colour_only():
     weights = jnp.ones((4, *gt.shape), jnp.float32)
     out = boundary_matte(d, jnp.asarray(own), others=others, other_weights=weights, **kw)
     np.testing.assert_array_equal(np.asarray(out)[:, 11], gt[:, 11])
+
+
+def _ramp_edge_scene(edge: float, slope: float, size: int = 24):
+    """`_edge_scene` with a background whose colour changes linearly across the columns,
+    ``slope`` of the foreground–background difference per pixel (zero at the edge): the
+    mean of the window's background pixels, a pixel or more from the edge, is not the
+    colour behind the edge pixel."""
+    x = np.arange(size, dtype=np.float64)
+    cover = np.clip(edge - (x - 0.5), 0.0, 1.0)
+    fg_col, bg_col = np.array([0.9, 0.2, 0.1]), np.array([0.1, 0.3, 0.8])
+    bg = bg_col + slope * (x - edge)[:, None] * (fg_col - bg_col)
+    row = cover[:, None] * fg_col + (1 - cover[:, None]) * bg
+    img = np.broadcast_to(row, (size, size, 3)).astype(np.float32)
+    gt = np.broadcast_to(np.where(x < edge, FG, BG), (size, size)).astype(np.float32)
+    return jnp.asarray(gt), jnp.asarray(img)
+
+
+@pytest.mark.parametrize("slope", [0.1, 0.15, -0.1, -0.15])
+@pytest.mark.parametrize("edge", [10.1, 10.3, 10.45, 10.55, 10.7, 10.9])
+def test_matte_background_fit_follows_a_colour_gradient(edge, slope):
+    # The linear fit of the background side's colours, read at the pixel, is the colour
+    # behind it: every pixel stays on its side of the ground truth.
+    gt, img = _ramp_edge_scene(edge, slope)
+    out = jax.jit(boundary_matte, static_argnames="background_fit")(gt, img, background_fit=1e3)
+    np.testing.assert_array_equal(np.asarray(out), np.asarray(gt))
+
+
+def test_matte_background_mean_misses_a_colour_gradient():
+    # The mean of the background side, 1.3 pixels from the edge pixel on average, is
+    # brighter towards the foreground colour than the colour behind it: the pixel whose
+    # centre the foreground covers (column 10, 60 % foreground) looks like background.
+    gt, img = _ramp_edge_scene(10.1, 0.15)
+    out = np.asarray(boundary_matte(gt, img))
+    np.testing.assert_array_equal(out[:, 10], np.full(24, BG, np.float32))
+    np.testing.assert_array_equal(np.delete(out, 10, axis=1), np.delete(np.asarray(gt), 10, 1))
+
+
+def test_matte_fits_without_strength_are_the_mean():
+    # A fit held back by a ridge of 1e9 is the mean up to rounding; 0 is the mean itself.
+    rng = np.random.default_rng(4)
+    gt, img = _ramp_edge_scene(10.45, 0.1)
+    img = jnp.asarray(np.clip(np.asarray(img) + rng.normal(0, 0.05, img.shape), 0, 1))
+    d = jnp.asarray(np.roll(np.asarray(gt), 1, axis=1))
+    mean = np.asarray(boundary_matte(d, img))
+    for kw in ({"foreground_fit": 1e-9}, {"background_fit": 1e-9}):
+        np.testing.assert_array_equal(np.asarray(boundary_matte(d, img, **kw)), mean)
+    # ... and a strong fit of either side changes decisions on this noisy ramp.
+    for kw in ({"foreground_fit": 1e3}, {"background_fit": 1e3}):
+        assert not np.array_equal(np.asarray(boundary_matte(d, img, **kw)), mean), kw
+
+
+def test_matte_fits_reject_bad_strengths():
+    gt, img = _ramp_edge_scene(10.3, 0.1)
+    for kw in ({"foreground_fit": -1.0}, {"background_fit": float("inf")}):
+        with pytest.raises(ValueError, match="_fit must be finite and >= 0"):
+            boundary_matte(gt, img, **kw)
+    with pytest.raises(ValueError, match="matte_view_foreground_fit"):
+        SharpenConfig(matte_view_foreground_fit=-1.0)

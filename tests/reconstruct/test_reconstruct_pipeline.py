@@ -346,3 +346,39 @@ def test_centre_matte_samples_the_other_views_at_the_snapped_map(small_scene):
     # the sharpening, whole pixels change sides.
     np.testing.assert_allclose(out, matte(snapped), atol=1e-5)
     assert np.abs(out - matte(entering)).max() > 0.5
+
+
+def test_matte_colour_fits_follow_the_config(small_scene):
+    # The centre map's fits reach the centre matte in their order (foreground, background)
+    # and leave the other views' matte as it is; the views' fits likewise the other way.
+    lf, run, not_centre = _sharpen_runs(small_scene)
+    base = dict(enabled=False, sweep_steps=0, shading_sigma=0.0)
+    sc = SharpenConfig(**base, matte_foreground_fit=0.5, matte_background_fit=3.0)
+    config = ReconstructConfig(sharpen=sc)
+    entering = jnp.asarray(grey_dilation(np.asarray(lf.centre_gt), size=(3, 3)))
+    ch_views, ch_pos = _cross_hair_views(lf.views)
+    c = jnp.int32(2)
+    snapped = _refine(entering, c, c, lf.views, ch_views, ch_pos, config, sc.refine_iterations)
+    guide = colour_guide(lf.centre_view, sc.matte_colour)
+    others = _matte_others(snapped, lf.views, config)
+
+    def matte(fits):
+        return np.asarray(
+            _matte(snapped, guide, config, sc.matte_jump, sc.matte_snap, others=others, fits=fits)
+        )
+
+    out = np.asarray(sharpen(lf.views, entering, config))
+    np.testing.assert_allclose(out, matte((0.5, 3.0)), atol=1e-5)
+    assert np.abs(out - matte((3.0, 0.5))).max() > 0.5
+    assert np.abs(out - matte((0.0, 0.0))).max() > 0.5
+    default = run()
+    centre = run(matte_foreground_fit=0.5, matte_background_fit=3.0)
+    views = run(matte_view_foreground_fit=3.0, matte_view_background_fit=0.5)
+    np.testing.assert_array_equal(views.centre_sharp, default.centre_sharp)
+    assert not np.array_equal(centre.centre_sharp, default.centre_sharp)
+    changed = np.any(np.asarray(views.disparity != default.disparity), axis=(2, 3))
+    assert changed[not_centre].any() and not changed[~not_centre].any()
+    # The views' fits reach their matte without the observed background too.
+    window = run(matte_view_steps=0)
+    fitted = run(matte_view_steps=0, matte_view_foreground_fit=3.0, matte_view_background_fit=0.5)
+    assert not np.array_equal(fitted.disparity, window.disparity)
