@@ -620,12 +620,16 @@ def _ramp_edge_scene(edge: float, slope: float, size: int = 24):
     return jnp.asarray(gt), jnp.asarray(img)
 
 
+@pytest.mark.parametrize("transpose", [False, True])
 @pytest.mark.parametrize("slope", [0.1, 0.15, -0.1, -0.15])
 @pytest.mark.parametrize("edge", [10.1, 10.3, 10.45, 10.55, 10.7, 10.9])
-def test_matte_background_fit_follows_a_colour_gradient(edge, slope):
+def test_matte_background_fit_follows_a_colour_gradient(edge, slope, transpose):
     # The linear fit of the background side's colours, read at the pixel, is the colour
-    # behind it: every pixel stays on its side of the ground truth.
+    # behind it: every pixel stays on its side of the ground truth (a vertical edge and,
+    # transposed, a horizontal one).
     gt, img = _ramp_edge_scene(edge, slope)
+    if transpose:
+        gt, img = gt.T, jnp.swapaxes(img, 0, 1)
     out = jax.jit(boundary_matte, static_argnames="background_fit")(gt, img, background_fit=1e3)
     np.testing.assert_array_equal(np.asarray(out), np.asarray(gt))
 
