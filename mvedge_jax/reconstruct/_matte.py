@@ -251,7 +251,9 @@ def boundary_matte(
     d_b = db / jnp.maximum(wb, tiny)
     if others is not None:
         w = other_weights * (sep_all[1:] > min_separation**2)
-        mean = (alpha + jnp.sum(w * alpha_all[1:], axis=0)) / (1.0 + jnp.sum(w, axis=0))
+        # A view weighted 0 adds nothing, even where its colours are not finite.
+        weighted = jnp.where(w > 0, w * alpha_all[1:], 0.0)
+        mean = (alpha + jnp.sum(weighted, axis=0)) / (1.0 + jnp.sum(w, axis=0))
         aligned = jnp.abs(hi - d_f) <= align_tolerance * jnp.abs(d_f - d_b)
         alpha = jnp.where(aligned, mean, alpha)
     # Near-ties (alpha ~ 1/2, e.g. an edge through the centre of a pixel) keep their value,

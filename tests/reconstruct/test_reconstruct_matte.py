@@ -665,3 +665,54 @@ def test_matte_fits_reject_bad_strengths():
             boundary_matte(gt, img, **kw)
     with pytest.raises(ValueError, match="matte_view_foreground_fit"):
         SharpenConfig(matte_view_foreground_fit=-1.0)
+
+
+def test_matte_near_tie_is_tested_on_the_combined_alpha():
+    # Column 10 is half covered: with the pixels on the discontinuity weighted 0, the window
+    # means are the two pure colours and its own α is 1/2, a near-tie that keeps its value
+    # (were the tie broken, α ≤ 1/2 would keep it on the background side too: a map on the
+    # foreground side shows it). Four other views that see it in the pure foreground colour
+    # make the mean α 0.9, and it is decided.
+    gt, img = _edge_scene(10.0)
+    fg = img.copy()
+    fg[:, 10] = img[:, 0]
+    others = jnp.asarray(np.stack([fg] * 4))
+    weights = jnp.ones((4, *gt.shape), jnp.float32)
+    d = gt.copy()
+    d[:, 10] = FG  # the map has column 10 on the foreground side
+    bg_side = np.asarray(boundary_matte(jnp.asarray(gt), img, impure_weight=0.0))
+    np.testing.assert_array_equal(bg_side[:, 10], gt[:, 10])
+    alone = np.asarray(boundary_matte(jnp.asarray(d), img, impure_weight=0.0, snap=0.0))
+    np.testing.assert_array_equal(alone[:, 10], d[:, 10])
+    out = np.asarray(
+        boundary_matte(
+            jnp.asarray(gt), img, others=others, other_weights=weights, impure_weight=0.0
+        )
+    )
+    np.testing.assert_allclose(out[:, 10], FG, atol=1e-5)
+
+
+@pytest.mark.parametrize("edge", [0.7, 1.3, 1.6, 2.45, 21.55, 22.4, 23.3])
+def test_matte_with_copies_of_its_own_view_is_the_matte_alone_at_the_frame_border(edge):
+    # Other views identical to this one give every pixel its own α, including windows that
+    # reach beyond the frame (whose border is replicated, for this view and the others).
+    gt, img = _edge_scene(edge)
+    d = jnp.asarray(np.roll(gt, 1, axis=1) if edge < 12 else np.roll(gt, -1, axis=1))
+    others = jnp.asarray(np.stack([img] * 3))
+    weights = jnp.ones((3, *gt.shape), jnp.float32)
+    np.testing.assert_array_equal(
+        np.asarray(boundary_matte(d, img, others=others, other_weights=weights)),
+        np.asarray(boundary_matte(d, img)),
+    )
+
+
+def test_matte_ignores_other_views_weighted_zero_even_if_not_finite():
+    # A view that weighs 0 (e.g. one without an image) adds nothing, NaN colours included.
+    gt, img, others, weights = _matte_with_others_scene()
+    bad = others.at[0].set(jnp.nan)
+    zero_first = weights.at[0].set(0.0)
+    d = jnp.asarray(gt)
+    out = np.asarray(boundary_matte(d, img, others=bad, other_weights=zero_first))
+    ref = np.asarray(boundary_matte(d, img, others=others[1:], other_weights=weights[1:]))
+    assert np.all(np.isfinite(out))
+    np.testing.assert_array_equal(out, ref)
