@@ -140,11 +140,12 @@ def boundary_matte(
         raise ValueError(f"radius must be >= 1; got {radius}")
     if not spatial_sigma > 0:
         raise ValueError(f"spatial_sigma must be > 0; got {spatial_sigma}")
-    fits = {"foreground_fit": foreground_fit, "background_fit": background_fit}
-    for name, value in fits.items():
-        if not 0 <= float(value) < float("inf"):
-            raise ValueError(f"{name} must be finite and >= 0 (0: the window mean); got {value}")
-    fit_f, fit_b = (float(v) > 0 for v in fits.values())
+    strength = {"f": float(foreground_fit), "b": float(background_fit)}
+    for side, name in (("f", "foreground_fit"), ("b", "background_fit")):
+        if not 0 <= strength[side] < float("inf"):
+            raise ValueError(
+                f"{name} must be finite and >= 0 (0: the window mean); got {strength[side]}"
+            )
     H, W = d.shape
     if (background is None) != (background_valid is None):
         raise ValueError("background and background_valid must be given together")
@@ -189,11 +190,11 @@ def boundary_matte(
     wf = wb = df = db = zeros
     cf = [zeros] * C
     cb = [zeros] * C
-    # Moments of the two sides' weights over the window offsets (a, b) and their colours'
-    # first moments, for the linear fits (``foreground_fit``, ``background_fit``).
-    moments = {side: [zeros] * 5 for side in "fb"}  # Σw a, Σw b, Σw a², Σw b², Σw a b
-    colour_moments = {side: ([zeros] * C, [zeros] * C) for side in "fb"}  # Σw a c, Σw b c
-    fitted = {"f": fit_f, "b": fit_b}
+    # For the sides with a linear fit (``foreground_fit``, ``background_fit``): moments of
+    # their weights over the window offsets (a, b) and their colours' first moments.
+    fitted = [side for side in "fb" if strength[side] > 0]
+    moments = {side: [zeros] * 5 for side in fitted}  # Σw a, Σw b, Σw a², Σw b², Σw a b
+    colour_moments = {side: ([zeros] * C, [zeros] * C) for side in fitted}  # Σw a c, Σw b c
     # Static unrolled loop over the window offsets: XLA fuses it into one pass.
     for a in range(-r, r + 1):
         for b in range(-r, r + 1):
@@ -210,31 +211,28 @@ def boundary_matte(
             w_b = jnp.where(fg, 0.0, w)
             wf, wb = wf + w_f, wb + w_b
             df, db = df + w_f * ds, db + w_b * ds
-            for side, w_s in (("f", w_f), ("b", w_b)):
-                if fitted[side]:
-                    m = moments[side]
-                    terms = (a * w_s, b * w_s, (a * a) * w_s, (b * b) * w_s, (a * b) * w_s)
-                    moments[side] = [x + t for x, t in zip(m, terms, strict=True)]
+            side_weights = {"f": w_f, "b": w_b}
+            for side in fitted:
+                w_s = side_weights[side]
+                terms = (a * w_s, b * w_s, (a * a) * w_s, (b * b) * w_s, (a * b) * w_s)
+                moments[side] = [x + t for x, t in zip(moments[side], terms, strict=True)]
             for c in range(C):
                 gs = g_p[c][:, r + a : r + a + H, r + b : r + b + W]
                 cf[c] = cf[c] + w_f * gs
                 cb[c] = cb[c] + w_b * gs
-                for side, w_s in (("f", w_f), ("b", w_b)):
-                    if fitted[side]:
-                        ca, cb_ = colour_moments[side]
-                        ca[c] = ca[c] + (a * w_s) * gs
-                        cb_[c] = cb_[c] + (b * w_s) * gs
+                for side in fitted:
+                    w_s = side_weights[side]
+                    ca, cb_ = colour_moments[side]
+                    ca[c] = ca[c] + (a * w_s) * gs
+                    cb_[c] = cb_[c] + (b * w_s) * gs
     tiny = jnp.asarray(1e-12, d.dtype)
-    F = (
-        _fit_at_pixel(wf, cf, moments["f"], colour_moments["f"], 1.0 / float(foreground_fit))
-        if fit_f
-        else [x / jnp.maximum(wf, tiny) for x in cf]
-    )
-    B = (
-        _fit_at_pixel(wb, cb, moments["b"], colour_moments["b"], 1.0 / float(background_fit))
-        if fit_b
-        else [x / jnp.maximum(wb, tiny) for x in cb]
-    )
+
+    def side_colour(side, w0, c0):
+        if side in moments:
+            return _fit_at_pixel(w0, c0, moments[side], colour_moments[side], 1 / strength[side])
+        return [x / jnp.maximum(w0, tiny) for x in c0]
+
+    F, B = side_colour("f", wf, cf), side_colour("b", wb, cb)
     if background is not None:  # this view's background only (index 0)
         B = [
             x.at[0].set(jnp.where(background_valid, background[..., c], x[0]))
