@@ -9,6 +9,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._fields import check_fields, hyperparameter
 from .._image import as_float_image
+from .._pad import edge_pad
 from ..solve import SolverConfig, SolveResult, solve_poisson
 from ._composite import RenderResult, render
 from ._config import RenderConfig
@@ -92,7 +93,7 @@ def image_gradient_magnitude(image: Float[ArrayLike, "H W *C"]) -> Float[Array, 
     """
     image = as_float_image(image, "image")
     im = image if image.ndim == 3 else image[..., None]
-    p = jnp.pad(im, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    p = edge_pad(im, ((1, 1), (1, 1), (0, 0)))
     gx = 0.5 * (p[1:-1, 2:] - p[1:-1, :-2])
     gy = 0.5 * (p[2:, 1:-1] - p[:-2, 1:-1])
     return jnp.sqrt(jnp.sum(gx * gx + gy * gy, axis=-1))

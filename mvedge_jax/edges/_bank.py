@@ -7,6 +7,8 @@ import math
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from .._pad import edge_pad
+
 
 def filter_disparities(n_filters: int, d_max: float) -> Float[Array, " n"]:
     """Candidate disparities of the bank: ``n_filters`` values evenly spaced in ``[-d_max, d_max]``.
@@ -133,9 +135,9 @@ def blur_images(
         ``(N, H, W, C)`` blurred images, same dtype.
     """
     g = gaussian_kernel(sigma, radius).astype(images.dtype)
-    p = jnp.pad(images, ((0, 0), (radius, radius), (0, 0), (0, 0)), mode="edge")
+    p = edge_pad(images, ((0, 0), (radius, radius), (0, 0), (0, 0)))
     H = images.shape[1]
     out = sum(g[i] * p[:, i : i + H] for i in range(2 * radius + 1))
-    p = jnp.pad(out, ((0, 0), (0, 0), (radius, radius), (0, 0)), mode="edge")
+    p = edge_pad(out, ((0, 0), (0, 0), (radius, radius), (0, 0)))
     W = images.shape[2]
     return sum(g[i] * p[:, :, i : i + W] for i in range(2 * radius + 1))

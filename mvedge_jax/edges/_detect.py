@@ -11,6 +11,8 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._pad import edge_pad
+
 _EPS = 1e-12
 
 
@@ -49,7 +51,7 @@ def _centre_conv(epis: Array, bank: Array) -> Array:
     sub = centre_bank(bank, h)
     pad = Fw // 2
     lhs = jnp.transpose(epis, (0, 3, 2, 1)).reshape(N * C, W, h)  # rows become in-channels
-    lhs = jnp.pad(lhs, ((0, 0), (pad, pad), (0, 0)), mode="edge")
+    lhs = edge_pad(lhs, ((0, 0), (pad, pad), (0, 0)))
     rhs = jnp.transpose(sub, (2, 1, 0)).astype(epis.dtype)  # (Fw, h, n)
     # Full float32 precision: a GPU would otherwise round the inputs to TensorFloat-32
     # (10-bit mantissa) by default.
@@ -132,7 +134,7 @@ def local_std(epis: Float[Array, "N h W C"]) -> Float[Array, "N W"]:
     # samples and a sum over the short channel axis run ~8x slower on XLA's CPU backend.
     variances = []
     for c in range(epis.shape[-1]):
-        rows = jnp.pad(epis[:, h // 2 - 1 : h // 2 + 2, :, c], ((0, 0), (0, 0), (1, 1)), "edge")
+        rows = edge_pad(epis[:, h // 2 - 1 : h // 2 + 2, :, c], ((0, 0), (0, 0), (1, 1)))
         samples = [rows[:, a, i : i + W] for a in range(3) for i in range(3)]
         mean = sum(samples) / 9.0
         variances.append(sum((x - mean) ** 2 for x in samples) / 9.0)

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from .._pad import edge_pad
 from ._detect import parabola_offset
 
 
@@ -153,7 +154,7 @@ def shift_stack(
                 ws = ((0, 1.0 - f), (1, f))
             for t, w in ws:
                 taps[pad + k0 + t, u, j] += w
-    p = jnp.pad(epi, ((0, 0), (pad, pad), (0, 0)), mode="edge")
+    p = edge_pad(epi, ((0, 0), (pad, pad), (0, 0)))
     out = jnp.zeros((h, W, S, C), epi.dtype)
     for k in np.flatnonzero(np.any(taps != 0, axis=(1, 2))):
         out = out + p[:, k : k + W, None, :] * jnp.asarray(taps[k], epi.dtype)[:, None, :, None]
@@ -254,7 +255,7 @@ def best_side_std(
 def sobel_tensor(epi: Float[Array, "h W C"]) -> Float[Array, "h W 3"]:
     """Colour structure tensor ``(gxx, gxy, gyy)`` of an EPI from 3x3 Sobel gradients
     (x along the EPI columns, y along its rows; edge-replicated borders)."""
-    p = jnp.pad(epi, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    p = edge_pad(epi, ((1, 1), (1, 1), (0, 0)))
     h, W = epi.shape[:2]
     sl = lambda dy, dx: p[1 + dy : 1 + dy + h, 1 + dx : 1 + dx + W]
     gx = (sl(-1, 1) + 2 * sl(0, 1) + sl(1, 1)) - (sl(-1, -1) + 2 * sl(0, -1) + sl(1, -1))

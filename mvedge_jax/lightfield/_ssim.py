@@ -7,6 +7,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._pad import edge_pad
+
 
 def _box3(a: Array, axes: tuple[int, int]) -> Array:
     """3×3 box mean with edge replication over the two spatial ``axes`` of a 3-D array.
@@ -19,7 +21,7 @@ def _box3(a: Array, axes: tuple[int, int]) -> Array:
     pad = [(0, 0)] * a.ndim
     for ax in axes:
         pad[ax] = (1, 1)
-    p = jnp.pad(a, pad, mode="edge")
+    p = edge_pad(a, pad)
     zero = np.zeros((), a.dtype)  # concrete, so that JAX picks the differentiable window sum
     for ax in axes:
         window = tuple(3 if i == ax else 1 for i in range(a.ndim))

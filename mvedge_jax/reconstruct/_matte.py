@@ -9,6 +9,7 @@ from jax import lax
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 from .._fields import check_lower_bound
+from .._pad import edge_pad
 from ._photo import _window_extrema
 
 
@@ -183,9 +184,9 @@ def boundary_matte(
     # faster on them than on (H, W, C) arrays with the channels innermost.
     # ``(1 + K, H, W)`` per channel: this view, then the others.
     gc = [g_all[..., c] for c in range(C)]
-    d_p = jnp.pad(d, r, mode="edge")
-    g_p = [jnp.pad(x, ((0, 0), (r, r), (r, r)), mode="edge") for x in gc]
-    p_p = jnp.pad(purity, r, mode="edge")
+    d_p = edge_pad(d, r)
+    g_p = [edge_pad(x, ((0, 0), (r, r), (r, r))) for x in gc]
+    p_p = edge_pad(purity, r)
     zeros = jnp.zeros_like(d)
     wf = wb = df = db = zeros
     cf = [zeros] * C

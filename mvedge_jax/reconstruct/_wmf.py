@@ -9,6 +9,8 @@ import jax.numpy as jnp
 from jax import lax
 from jaxtyping import Array, ArrayLike, Float
 
+from .._pad import edge_pad
+
 WEIGHT_TYPES = ("exp", "iv1", "iv2", "cos", "jac", "off")
 
 
@@ -235,7 +237,7 @@ def disparity_slopes(
     k = int(baseline)
     if k < 1:
         raise ValueError(f"baseline must be >= 1; got {baseline}")
-    pad = jnp.pad(d, k, mode="edge")
+    pad = edge_pad(d, k)
     H, W = d.shape
     c = pad[k : k + H, k : k + W]
     sx = _minmod(pad[k : k + H, 2 * k :] - c, c - pad[k : k + H, :W]) / k

@@ -15,6 +15,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 from sklearn.cluster import KMeans
 
+from .._pad import edge_pad
 from ..edges import HORIZONTAL, VERTICAL, EdgeSet, detect_edges
 from ..lightfield import LightField, rgb_to_lab
 from ..metrics import centroid_deviation_from_sums
@@ -341,7 +342,7 @@ def _mode_filter(labels: Int[Array, "H W"], radius: int) -> Int[Array, "H W"]:
     keeps its own label unless another one is strictly more frequent (ties among the others:
     the first in row-major window order)."""
     H, W = labels.shape
-    p = jnp.pad(labels, radius, mode="edge")
+    p = edge_pad(labels, radius)
     side = 2 * radius + 1
     win = [p[i // side : i // side + H, i % side : i % side + W] for i in range(side * side)]
 
@@ -394,7 +395,7 @@ def _refine_centre(
         cnt = jax.ops.segment_sum(jnp.ones((H * W,), jnp.float32), ids, n_labels)
         tot = jax.ops.segment_sum(flat_f, ids, n_labels)
         centres = tot / jnp.maximum(cnt, 1.0)[:, None]
-        p = jnp.pad(lab, r, mode="edge")
+        p = edge_pad(lab, r)
         best, best_d = lab, jnp.sum((feats - centres[lab]) ** 2, -1)
         for dy, dx in offs:
             cand = p[r + dy : r + dy + H, r + dx : r + dx + W]

@@ -10,6 +10,7 @@ from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
 from .._fields import check_fields, hyperparameter, static
+from .._pad import edge_pad
 from ..edges import EdgeSet
 from ..lightfield import rgb_to_lab
 from ..solve import SolverConfig, guide_edge_weights, solve_poisson
@@ -89,7 +90,7 @@ def _gaussian_blur(img: Array, sigma: Array, radius: int) -> Array:
     t = jnp.arange(-radius, radius + 1, dtype=img.dtype)
     k = jnp.exp(-0.5 * (t / jnp.maximum(sigma, 1e-3)) ** 2)
     k = k / k.sum()
-    pad = jnp.pad(img, ((radius, radius), (radius, radius), (0, 0)), mode="edge")
+    pad = edge_pad(img, ((radius, radius), (radius, radius), (0, 0)))
     h = sum(k[i] * pad[:, i : i + img.shape[1]] for i in range(2 * radius + 1))
     return sum(k[i] * h[i : i + img.shape[0]] for i in range(2 * radius + 1))
 
