@@ -15,6 +15,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._fields import check_lower_bound
 from .._jit import filter_jit_bound
+from .._loop import map_where
 from ..edges import EdgeSet
 from ..lightfield import forward_project
 from ..solve import guide_edge_weights, solve_poisson
@@ -614,8 +615,11 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
-        matted = lax.map(
+        # A view without an image (partial grids) keeps its map: no colours to decide on.
+        matted = map_where(
             lambda pair: _matte(pair[0], pair[1], config, jump, snap, fits=fits),
+            lambda pair: pair[0],
+            present[r_j, c_j],
             (disparity[r_j, c_j], own),
         )
         return disparity.at[r_j, c_j].set(matted)
@@ -657,7 +661,12 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         background = samples_to_frame(f, col, ok, (H, W))
         return _matte(d, guide, config, jump, snap, background, fits=fits)
 
-    matted = lax.map(one, (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid))
+    matted = map_where(
+        one,
+        lambda args: args[0],
+        present[r_j, c_j],
+        (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid),
+    )
     return disparity.at[r_j, c_j].set(matted)
 
 
