@@ -35,7 +35,8 @@ def test_integer_and_bool():
     x = np.arange(12, dtype=np.int32).reshape(3, 4)
     np.testing.assert_array_equal(edge_pad(x, 1), np.pad(x, 1, mode="edge"))
     b = x % 3 == 0
-    np.testing.assert_array_equal(edge_pad(b, ((2, 0), (0, 1))), np.pad(b, ((2, 0), (0, 1)), "edge"))
+    width = ((2, 0), (0, 1))
+    np.testing.assert_array_equal(edge_pad(b, width), np.pad(b, width, mode="edge"))
 
 
 def test_gradient_gathers_the_border():
