@@ -716,3 +716,37 @@ def test_matte_ignores_other_views_weighted_zero_even_if_not_finite():
     ref = np.asarray(boundary_matte(d, img, others=others[1:], other_weights=weights[1:]))
     assert np.all(np.isfinite(out))
     np.testing.assert_array_equal(out, ref)
+
+
+@pytest.mark.parametrize("steps", [0, 4])
+def test_views_matte_keeps_the_map_of_a_view_without_an_image(steps):
+    # `_matte_views` runs each view's matte where the view holds an image (`map_where`); a
+    # view missing from a partial grid keeps its map, the views with an image are matted
+    # as one `boundary_matte` call each.
+    from mvedge_jax.reconstruct import ReconstructConfig
+    from mvedge_jax.reconstruct._reconstruct import _matte_views
+
+    gt, img = _edge_scene(10.3)
+    fattened = np.where(np.arange(24) < 12, FG, BG).astype(np.float32)  # column 11 is BG
+    d = np.broadcast_to(fattened, (3, 3, 24, 24)).copy()
+    views = np.broadcast_to(linear_to_srgb(img), (3, 3, 24, 24, 3)).copy()
+    views[0, 2] = 0.0
+    present = jnp.asarray(np.max(views, axis=(2, 3, 4)) > 0)
+    config = ReconstructConfig(sharpen=SharpenConfig(matte_view_steps=steps))
+    guides = colour_guide(jnp.asarray(views), config.colour_space)
+    out = np.asarray(_matte_views(jnp.asarray(d), jnp.asarray(views), guides, present, config))
+    np.testing.assert_array_equal(out[0, 2], d[0, 2])
+    np.testing.assert_array_equal(out[1, 1], d[1, 1])  # the centre view is not matted here
+    guide = colour_guide(jnp.asarray(views[0, 0]), config.sharpen.matte_colour)
+    alone = boundary_matte(
+        d[0, 0],
+        guide,
+        jump=config.sharpen.matte_view_jump,
+        snap=config.sharpen.matte_view_snap,
+        min_separation=config.sharpen.matte_min_separation,
+        impure_weight=config.sharpen.matte_impure_weight,
+        foreground_fit=config.sharpen.matte_view_foreground_fit,
+    )
+    assert not np.array_equal(out[0, 0], d[0, 0])
+    if steps == 0:
+        np.testing.assert_array_equal(out[0, 0], np.asarray(alone))
