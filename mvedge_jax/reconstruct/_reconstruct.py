@@ -602,7 +602,8 @@ def _matte_others(centre: Array, views: Array, config: ReconstructConfig):
 
 def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, config) -> Array:
     """Step 4 of `propagate`: `boundary_matte` of the map of every view but the centre, with
-    the background colour `observed_background` gives (``sharpen.matte_view_steps > 0``)."""
+    the background colour `observed_background` gives (``sharpen.matte_view_steps > 0``).
+    A view without an image (``present`` false; partial grids) keeps its map (`map_where`)."""
     U, V = disparity.shape[:2]
     rc, cc = U // 2, V // 2
     sc = config.sharpen
