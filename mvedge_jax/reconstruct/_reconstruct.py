@@ -616,14 +616,13 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
-        # A view without an image (partial grids) keeps its map: no colours to decide on.
-        matted = map_where(
+        return _map_views(
             lambda pair: _matte(pair[0], pair[1], config, jump, snap, fits=fits),
-            lambda pair: pair[0],
-            present[r_j, c_j],
             (disparity[r_j, c_j], own),
+            disparity,
+            present,
+            (r_j, c_j),
         )
-        return disparity.at[r_j, c_j].set(matted)
     # The samples come from every view, the centre included.
     matte_guides = guides if same else colour_guide(views, sc.matte_colour)
     H, W = disparity.shape[2:]
@@ -662,13 +661,16 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         background = samples_to_frame(f, col, ok, (H, W))
         return _matte(d, guide, config, jump, snap, background, fits=fits)
 
-    matted = map_where(
-        one,
-        lambda args: args[0],
-        present[r_j, c_j],
-        (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid),
-    )
-    return disparity.at[r_j, c_j].set(matted)
+    inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid)
+    return _map_views(one, inputs, disparity, present, (r_j, c_j))
+
+
+def _map_views(matte, inputs, disparity: Array, present: Array, views) -> Array:
+    """``disparity`` with the maps of the ``views`` (``(rows, cols)``) replaced by
+    ``matte`` of their ``inputs`` (whose first entry is the map), one view at a time; a view
+    without an image (partial grids) keeps its map: no colours to decide on (`map_where`)."""
+    matted = map_where(matte, lambda args: args[0], present[views], inputs)
+    return disparity.at[views].set(matted)
 
 
 def _check_views(views) -> tuple[int, int, int, int]:
