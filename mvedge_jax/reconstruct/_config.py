@@ -388,6 +388,13 @@ class EpiConfig(eqx.Module):
             ``fill_choice = "colour"`` (CIELAB / 100 or RGB, as ``colour_space``; L1 over the
             channels): the colour-nearest of the four candidates replaces the farthest only
             where its colour is closer by more than this.
+        frame_margin: (threshold) with ``cross_hair_fill``, `fill_beyond_frame`'s
+            ``margin`` (pixels per view step) after the fill of the holes: a hole in a run
+            of holes along the view's row (centre row) or column (centre column) that
+            reaches the frame's border takes the run's farthest value where that value's
+            surface point lies beyond the centre view's frame and is farther than the
+            hole's own value by more than this (the strip along the border where a far
+            surface enters the view beside a nearer one); 1e9: off.
 
     Attributes (static):
         cross_hair_fill: in every cross-hair view but the centre, the holes of the
@@ -460,6 +467,7 @@ class EpiConfig(eqx.Module):
     visibility_passes: int = static(2, lower=1, upper=8)
     visibility_tol: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
     colour_margin: Array = hyperparameter(0.3, differentiable=False, lower=0.0)
+    frame_margin: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     solver: SolverConfig = SolverConfig(preconditioner="jacobi", max_iters=1000)
 
     def __check_init__(self):

@@ -318,14 +318,18 @@ def fill_beyond_frame(
     surface alone (the row of the far wall just above a near object's top edge, with the
     rest of the wall's holes above it up to the border).
 
-    For every run of holes along a row or a column that reaches the frame's border (no
-    valid pixel between the pixel and the border), the run's farthest (smallest) filled
-    value ``v`` replaces a hole's own where it is farther by more than ``margin`` and the
-    surface point it stands for lies beyond the centre frame: ``x + (dr, dc)·v`` (the
-    inverse of `forward_project`) more than half a pixel outside it, so the centre view
-    could not have seen that surface there. Of the four runs (from the top, bottom, left and
-    right border) the farthest such value wins. Valid pixels and holes of runs that do not
-    reach the border are unchanged. jit/vmap-able; a selection of the input values
+    For every run of holes along a row (where ``dc != 0``) or a column (where ``dr != 0``)
+    that reaches the frame's border (no valid pixel between the pixel and the border), the
+    run's farthest (smallest) filled value ``v`` replaces a hole's own where it is farther
+    by more than ``margin`` and the surface point it stands for lies beyond the centre
+    frame: ``x + (dr, dc)·v`` (the inverse of `forward_project`) more than half a pixel
+    outside it, so the centre view could not have seen that surface there. Of the (up to)
+    four runs (from the top, bottom, left and right border) the farthest such value wins.
+    Only runs along an axis of the view's displacement count: a surface beyond the frame
+    enters the view along that axis, while across it (a column of a view on the centre
+    row) a run may span surfaces at other depths, any of which would pass the test at a
+    border the displacement crosses. Valid pixels and holes of runs that do not reach the
+    border are unchanged. jit/vmap-able; a selection of the input values
     (differentiable in them, not in the choice).
 
     Args:
@@ -378,7 +382,8 @@ def fill_beyond_frame(
         far = jnp.min(jnp.where(run, values, big), axis=axis, keepdims=True)
         cy, cx = ys + offset[0] * far, xs + offset[1] * far
         beyond = (cy < -0.5) | (cy > H - 0.5) | (cx < -0.5) | (cx > W - 0.5)
-        best = jnp.minimum(best, jnp.where(run & beyond, far, big))
+        along = offset[axis] != 0  # column runs (axis 0) move with dr, row runs with dc
+        best = jnp.minimum(best, jnp.where(run & beyond & along, far, big))
     margin = jnp.asarray(margin, filled.dtype)
     return jnp.where(hole & (best < filled - margin), best, filled)
 
@@ -437,7 +442,8 @@ def _cross_hair_fill(
     """``config.epi.cross_hair_fill`` on a stack of cross-hair maps ``(K, H, W)`` with their
     projection's ``valid`` and photometric confidence; entry ``centre`` is kept.
     ``offsets`` ``(K, 2)``: the views' ``(dr, dc)``; ``centre_map``: the projected map;
-    ``guides`` ``(K, H, W, C)``: the views' colour guides."""
+    ``guides`` ``(K, H, W, C)``: the views' colour guides. The filled maps then go
+    through `fill_beyond_frame` with ``config.epi.frame_margin``."""
     ok = valid & (conf > config.epi.min_confidence)
 
     def view_fill(values, keep, guide):
@@ -492,6 +498,9 @@ def _cross_hair_fill(
                 lambda _, state: lax.map(refill, (*state, guides, offsets)),
                 (fallback, ~valid & all_bad),
             )
+    fallback = jax.vmap(fill_beyond_frame, (0, 0, 0, None))(
+        fallback, ok, offsets, config.epi.frame_margin
+    )
     return fallback.at[centre].set(maps[centre])
 
 
@@ -1057,7 +1066,10 @@ def propagate(
        ``config.epi.cross_hair_fill``, the holes of each cross-hair view then take the
        view's 2-D fill (`colour_fill` with ``epi.colour_margin``, or `background_fill` with
        ``epi.fill_choice = "farthest"``; with ``epi.hole_value = "farther"`` the farther of
-       that and their inpainted value).
+       that and their inpainted value; with ``epi.visibility_fill`` checked against the
+       centre map), then `fill_beyond_frame` with ``epi.frame_margin`` (holes cut off by
+       the frame's border along the view's row or column take the far surface beyond the
+       centre frame).
     3. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and pixels of confidence ≤ ``fill.min_confidence``
@@ -1139,11 +1151,12 @@ def reconstruct(
        ``config.epi.cross_hair_fill`` the holes of each cross-hair view take the view's
        2-D fill (`colour_fill` with ``epi.colour_margin``, or `background_fill` with
        ``epi.fill_choice = "farthest"``; with ``epi.hole_value = "farther"`` the farther of
-       that and the inpainted value).
+       that and the inpainted value), then `fill_beyond_frame` with ``epi.frame_margin``.
     5. Views off the cross-hair: mean of the reprojections of the nearest horizontal and
        vertical cross-hair views (weighted by their photometric confidence with
        ``fill.merge="photo"``); holes and low-confidence pixels filled
-       (``config.fill.hole_fill``; 2-D fill `colour_fill` with ``fill.colour_margin``).
+       (``config.fill.hole_fill``; 2-D fill `colour_fill` with ``fill.colour_margin``, then
+       `fill_beyond_frame` with ``fill.frame_margin``).
     6. With ``config.sharpen.matte_views``: `boundary_matte` of every view but the centre,
        with the background colours of `observed_background` (``sharpen.matte_view_steps``).
 

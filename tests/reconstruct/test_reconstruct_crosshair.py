@@ -255,6 +255,27 @@ def test_fill_beyond_frame_runs_from_every_border():
         np.testing.assert_array_equal(back, turn(filled), err_msg=str(offset))
 
 
+def test_fill_beyond_frame_runs_along_the_views_displacement_only():
+    # The right border column is a hole from top to bottom: the wall (-3) in rows 0-4, a
+    # floor (-1) below, the holes filled with their row's value. Seen from a view two steps
+    # left of the centre, every value of that column lies beyond the centre's right border
+    # (9 - 2 * v > 9.5), so the column's run (its farthest value, the wall) would pass the
+    # test on the floor's rows. On the centre row (dr = 0) only the row runs count: the
+    # floor's run along its row is its own value, no change. Off the cross-hair the column
+    # run counts too.
+    H, W = 12, 10
+    filled = np.full((H, W), -1.0, np.float32)
+    filled[:5] = -3.0
+    valid = np.ones((H, W), bool)
+    valid[:, -1] = False
+    out = np.asarray(fill_beyond_frame(filled, valid, jnp.array([0.0, -2.0])))
+    np.testing.assert_array_equal(out, filled)
+    diagonal = np.asarray(fill_beyond_frame(filled, valid, jnp.array([2.0, -2.0])))
+    expected = filled.copy()
+    expected[:, -1] = -3.0
+    np.testing.assert_array_equal(diagonal, expected)
+
+
 def test_fill_beyond_frame_half_pixel_past_the_frame():
     # One step below the centre: row 5's wall point lies at 5 - 5.25 = -0.25, within half a
     # pixel of the frame (a centre pixel still sees it), or at 5 - 5.75 = -0.75, beyond.

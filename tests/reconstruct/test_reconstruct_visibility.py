@@ -1,5 +1,5 @@
 """Visibility test of the cross-hair hole fill (`contradicted_by_centre`,
-``EpiConfig.visibility_fill``)."""
+``EpiConfig.visibility_fill``, ``EpiConfig.frame_margin``)."""
 
 from __future__ import annotations
 
@@ -139,6 +139,37 @@ def test_second_pass_reaches_the_background_through_resolved_holes(passes, fill_
     expected = np.asarray(maps).copy()
     expected[0, 0, 3:5] = -2.0
     expected[0, 1:, 3:5] = -2.0 if passes == 2 else 2.0
+    np.testing.assert_array_equal(out, expected)
+
+
+@pytest.mark.parametrize("margin", [0.1, 1e9])
+def test_frame_margin_gives_the_border_strip_the_far_surface(margin):
+    """One row of 3 views (the centre is view 1; view 2 is one step right, ``dc = 1``). View
+    2: row 0 holds the black far wall (-3) in columns 0-4 and the white object (+1) from
+    column 5; in rows 1-3 columns 0-4 are holes that reach the left border, white-ish in
+    columns 2-4 (a colour the 2-D fill matches to the object) and black in columns 0-1.
+    The fill gives columns 0-1 the wall and columns 2-4 the object. ``epi.frame_margin``
+    then gives column 2 the wall, the run's farthest value: its point lies at 2 - 3 = -1,
+    beyond the centre frame. Columns 3-4 (points at 0 and 1, inside the frame) keep the
+    object; 1e9 turns the rule off."""
+    K, H, W = 3, 4, 10
+    view2 = jnp.full((H, W), 1.0).at[0, :5].set(-3.0)
+    centre = jnp.full((H, W), 5.0)  # nearer than every candidate: nothing is contradicted
+    maps = jnp.stack([centre, centre, view2])
+    valid = jnp.ones((K, H, W), bool).at[2, 1:, :5].set(False)
+    grey = jnp.ones((H, W)).at[0, :5].set(0.0).at[1:, :2].set(0.0).at[1:, 2:5].set(0.9)
+    guides = jnp.stack([jnp.full((H, W), 0.5), jnp.full((H, W), 0.5), grey])[..., None]
+    guides = jnp.broadcast_to(guides, (K, H, W, 3))
+    offsets = jnp.stack([jnp.zeros(K), jnp.arange(K) - 1.0], axis=1)
+    config = dataclasses.replace(ReconstructConfig(), epi=EpiConfig(frame_margin=margin))
+    out = np.asarray(
+        _cross_hair_fill(maps, valid, jnp.ones_like(maps), 1, offsets, centre, guides, config)
+    )
+    expected = np.asarray(maps).copy()
+    expected[2, 1:, :2] = -3.0
+    expected[2, 1:, 2:5] = 1.0
+    if margin < 1:
+        expected[2, 1:, 2] = -3.0
     np.testing.assert_array_equal(out, expected)
 
 
