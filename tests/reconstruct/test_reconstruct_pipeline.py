@@ -24,6 +24,7 @@ from mvedge_jax.reconstruct._reconstruct import (
     _cross_hair_views,
     _matte,
     _matte_others,
+    _matte_views,
     _refine,
 )
 
@@ -373,12 +374,24 @@ def test_matte_colour_fits_follow_the_config(small_scene):
     assert np.abs(out - matte((0.0, 0.0))).max() > 0.5
     default = run()
     centre = run(matte_foreground_fit=0.5, matte_background_fit=3.0)
-    views = run(matte_view_foreground_fit=3.0, matte_view_background_fit=0.5)
-    np.testing.assert_array_equal(views.centre_sharp, default.centre_sharp)
     assert not np.array_equal(centre.centre_sharp, default.centre_sharp)
-    changed = np.any(np.asarray(views.disparity != default.disparity), axis=(2, 3))
-    assert changed[not_centre].any() and not changed[~not_centre].any()
-    # The views' fits reach their matte without the observed background too.
-    window = run(matte_view_steps=0)
-    fitted = run(matte_view_steps=0, matte_view_foreground_fit=3.0, matte_view_background_fit=0.5)
-    assert not np.array_equal(fitted.disparity, window.disparity)
+    # The views' matte is the chain's last step (`_matte_views` on the maps the chain gives
+    # without it, with and without the observed background: the runs of the tests above).
+    # Its fits, read from the config, change the views other than the centre only.
+    before = run(matte_views=False).disparity
+    guides = colour_guide(lf.views, ReconstructConfig().colour_space)
+    present = jnp.ones(lf.grid, bool)
+
+    def views_matte(**kw):
+        cfg = ReconstructConfig(sharpen=SharpenConfig(**kw))
+        return np.asarray(jax.jit(_matte_views)(before, lf.views, guides, present, cfg))
+
+    for steps in (4, 0):
+        chain = run() if steps == 4 else run(matte_view_steps=0)
+        plain = views_matte(matte_view_steps=steps)
+        np.testing.assert_allclose(plain, chain.disparity, atol=1e-5)
+        fitted = views_matte(
+            matte_view_steps=steps, matte_view_foreground_fit=3.0, matte_view_background_fit=0.5
+        )
+        changed = np.any(fitted != plain, axis=(2, 3))
+        assert changed[not_centre].any() and not changed[~not_centre].any(), steps
