@@ -3,20 +3,24 @@ reconstruction's steps.
 
 Usage::
 
-    python experiments/program_taps.py [--deterministic]
+    python experiments/program_taps.py [--deterministic] [--save DIR]
 
 The test point of ``tests/pipeline/test_pipeline_gradients.py`` (5×5×32² synthetic light
 field, float64, `smooth_config` with the solvers to 1e-12). The outputs of the
 reconstruction's steps (colour guides, cross-hair projection, edge lines and their
 rasterisation, photometric confidences, EPI solves, cross-hair fill, the other views'
-merges and fill, the views' matte) and the inputs of the reconstruction are recorded with
-`jax.debug.callback` in the compiled forward program (the loss) and in the compiled
-gradient program (its forward pass); prints, per step and call, the largest difference and
-the number of elements that differ by more than 1e-12 (``same`` where none). On the CPU the
-two programs agree to rounding (1e-14); a step whose inputs agree and whose outputs do not
-is where a compiled program computes something else. The taps change what XLA fuses, so a
-difference can move or vanish with them: compare with `experiments/chain_gradients.py`,
-which has none.
+merges and fill, the views' matte), their array inputs (``NAME #k inputs``) and the inputs
+of the reconstruction are recorded with `jax.debug.callback` in the compiled forward
+program (the loss) and in the compiled gradient program (its forward pass); prints, per
+step and call, the largest difference and the number of elements that differ by more than
+1e-12, ``rounding only`` with the count of elements that are not bit-identical where no
+difference exceeds 1e-12, and ``same`` where the two are bit-identical. On the CPU the two
+programs agree to rounding (1e-14); a step whose inputs agree and whose outputs do not is
+where a compiled program computes something else. ``--save DIR`` writes every recorded
+array (``DIR/forward.npz``, ``DIR/gradient.npz``; keys ``"TAP | call N | I"``), so that a
+step can be replayed on another device with either program's inputs. The taps change what
+XLA fuses, so a difference can move or vanish with them: compare with
+`experiments/chain_gradients.py`, which has none.
 """
 
 from __future__ import annotations
@@ -58,8 +62,14 @@ def _differences(a: tuple, b: tuple) -> str:
             d = np.abs(x.astype(np.float64) - y.astype(np.float64))
             d = np.where(np.isnan(x) & np.isnan(y), 0.0, d)
             n = int(np.sum(d > 1e-12))
+            bits = int(np.sum((x != y) & ~(np.isnan(x) & np.isnan(y))))
             if n:
                 parts.append(f"[{i}] largest {float(np.nanmax(d)):.3e}, {n} of {x.size}")
+            elif bits:
+                parts.append(
+                    f"[{i}] rounding only: largest {float(np.nanmax(d)):.1e}, "
+                    f"{bits} of {x.size} not bit-identical"
+                )
     return "; ".join(parts) or "same"
 
 
@@ -70,7 +80,17 @@ def main(argv: list[str] | None = None) -> None:
         action="store_true",
         help="request XLA's deterministic GPU kernels (no effect on the CPU)",
     )
+    parser.add_argument(
+        "--save",
+        type=Path,
+        default=None,
+        help="write every recorded array to SAVE/forward.npz and SAVE/gradient.npz",
+    )
     args = parser.parse_args(argv)
+    if args.save is not None and any(
+        (args.save / f"{p}.npz").exists() for p in ("forward", "gradient")
+    ):
+        sys.exit(f"{args.save} holds forward.npz or gradient.npz; not overwritten")
     if args.deterministic:
         from mvedge_jax import request_deterministic_gpu
 
@@ -98,8 +118,12 @@ def main(argv: list[str] | None = None) -> None:
         def wrapper(*a, **kw):
             out = fn(*a, **kw)
             calls[name] += 1
+            tap = f"{name} #{calls[name]}"
+            inputs = [x for x in jax.tree.leaves((a, kw)) if hasattr(x, "dtype")]
+            if inputs:
+                jax.debug.callback(functools.partial(record, f"{tap} inputs"), *inputs)
             leaves = [x for x in jax.tree.leaves(out) if hasattr(x, "dtype")]
-            jax.debug.callback(functools.partial(record, f"{name} #{calls[name]}"), *leaves)
+            jax.debug.callback(functools.partial(record, tap), *leaves)
             return out
 
         return wrapper
@@ -147,6 +171,18 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{tap}: {len(f)} calls in the forward program, {len(g)} in the gradient one")
         for call, (a, b) in enumerate(zip(f, g, strict=False)):
             print(f"{tap}, call {call}: {_differences(a, b)}", flush=True)
+    if args.save is not None:
+        args.save.mkdir(parents=True, exist_ok=True)
+        for prog in ("forward", "gradient"):
+            arrays = {
+                f"{tap} | call {call} | {i}": x
+                for (p, tap), recorded in records.items()
+                if p == prog
+                for call, leaves in enumerate(recorded)
+                for i, x in enumerate(leaves)
+            }
+            np.savez_compressed(args.save / f"{prog}.npz", **arrays)
+        print(f"recorded arrays written to {args.save}")
 
 
 if __name__ == "__main__":
