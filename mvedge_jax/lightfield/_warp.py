@@ -311,8 +311,17 @@ def _check_crack_parallax(crack_parallax) -> None:
 
 @functools.partial(jax.jit, static_argnames=("fill_cracks",))
 def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bool):
-    """``(K, H, W)`` maps, ``(K,)`` offsets; one flat z-buffer of ``K (H W + 1)`` slots
-    (each frame's last slot is its dump slot)."""
+    """``(K, H, W)`` maps, ``(K,)`` offsets: the z-buffer, then the crack fill."""
+    vals, valid, src = _zbuffer(disparity, mask, dr, dc)
+    if not fill_cracks:
+        return vals, valid
+    return _fill_cracks(vals, valid, src, dr, dc, crack_parallax)
+
+
+def _zbuffer(disparity, mask, dr, dc):
+    """The z-buffered projection: ``(vals, valid, src)``, ``(K, H, W)`` each, ``src`` the
+    winning source pixel's flat index in its frame (-1 at holes). One flat z-buffer of
+    ``K (H W + 1)`` slots (each frame's last slot is its dump slot)."""
     K, H, W = disparity.shape
     dtype = disparity.dtype if jnp.issubdtype(disparity.dtype, jnp.floating) else jnp.float32
     d = disparity.astype(dtype)
@@ -345,12 +354,15 @@ def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bo
     # indices, so that the gradient's scatter-add is unbatched too.
     first = (jnp.arange(K, dtype=jnp.int32) * n)[:, None]
     vals = jnp.where(valid, d.ravel()[(safe + first).ravel()].reshape(K, n), 0.0)
-    vals = vals.reshape(K, H, W)
-    valid = valid.reshape(K, H, W)
-    if not fill_cracks:
-        return vals, valid
+    return vals.reshape(K, H, W), valid.reshape(K, H, W), src.reshape(K, H, W)
 
-    src = src.reshape(K, H, W)
+
+def _fill_cracks(vals, valid, src, dr, dc, crack_parallax):
+    """`forward_project`'s mesh rule on the z-buffer's output (``dr``, ``dc``: ``(K,)``)."""
+    K, H, W = vals.shape
+    dtype = vals.dtype
+    dr = dr.astype(dtype)[:, None, None]
+    dc = dc.astype(dtype)[:, None, None]
     sy, sx = src // W, src % W
     norm = jnp.sqrt(dr * dr + dc * dc)
 
