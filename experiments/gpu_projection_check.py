@@ -18,8 +18,9 @@ Formulations: ``none`` (no crack fill; the control), ``library``
 ``roll`` (neighbours by `jnp.roll` and border masks instead of pad and slice), ``coords``
 (the winners' source rows and columns gathered from coordinate grids instead of integer
 division), ``no-inf`` (a validity mask instead of the −∞ sentinel), ``float`` (no padding of
-bool or int arrays). Each is checked bit-identical to ``library`` on the CPU; the script
-exits with an error where one is not.
+bool or int arrays; with ``no-inf``) and ``all`` (every one of these changes). Each is
+checked bit-identical to ``library`` on the CPU; the script exits with an error where one
+is not.
 
 On an NVIDIA H200 with JAX 0.11.2 (docs/RESULTS.md, "GPU"), the cross-hair projection of a
 32×32 float64 map compiled alone gave wrong crack fills in the forward program and a wrong
@@ -103,6 +104,15 @@ def _variants(jnp):
         sy, sx = divide(src, H, W)
         return sy.astype(jnp.float32), sx.astype(jnp.float32)
 
+    def roll_float_shift(a, oy, ox, fillv):
+        if a.dtype != bool:
+            return roll_shift(a, oy, ox, fillv)
+        return roll_shift(a.astype(jnp.float32), oy, ox, float(fillv)) > 0.5
+
+    def gather_float(src, H, W):
+        sy, sx = gather(src, H, W)
+        return sy.astype(jnp.float32), sx.astype(jnp.float32)
+
     def make(**kw):
         return lambda *a: generic(*a, **kw)
 
@@ -113,6 +123,7 @@ def _variants(jnp):
         "coords": make(shift=pad_shift, coords=gather, sentinel=True),
         "no-inf": make(shift=pad_shift, coords=divide, sentinel=False),
         "float": make(shift=float_shift, coords=float_coords, sentinel=False),
+        "all": make(shift=roll_float_shift, coords=gather_float, sentinel=False),
     }
 
 
