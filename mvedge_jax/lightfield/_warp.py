@@ -255,10 +255,11 @@ def forward_project_views(
 
     The same values as ``jax.vmap(forward_project)`` over the maps and offsets, computed
     with one z-buffer over all ``K`` frames (flat indices offset per frame), so the program
-    holds unbatched scatters only. Prefer it to a ``vmap`` of `forward_project`, whose
-    scatters carry batching dimensions: on a GPU with XLA's deterministic kernels
-    (`mvedge_jax.request_deterministic_gpu`) such scatters gave different pixels in two
-    compiled programs of one function (JAX 0.11.2; docs/RESULTS.md, "GPU").
+    holds unbatched scatters only. On an NVIDIA H200 with JAX 0.11.2, XLA compiled the crack
+    fill into wrong code (wrong filled pixels in float64, wrong gradients in float32 and
+    float64; the projection without it was right): on a GPU, compare with the CPU before
+    relying on it (`experiments/gpu_projection_check.py`; docs/RESULTS.md, "The crack fill
+    compiles to wrong code").
 
     Args:
         disparity: ``(K, H, W)`` float disparity of the source view of each projection, or
