@@ -37,7 +37,8 @@ class SurfaceConfig(eqx.Module):
             sides at 2.5, against 81%/90% at 1.0).
         offset: distance (pixels) of the forward/backward splat from the point (thesis: 1).
         confidence_scale: disparity gradient (pixels per view step per pixel) at which the
-            depth-edge confidence reaches ``1 - 1/e``.
+            depth-edge confidence reaches ``1 - 1/e`` (default 0.12, chosen by
+            leave-one-scene-out; docs/ACCURACY.md, "Scale of the depth-edge confidence").
         blur_radius: support radius (pixels) of that blur (static).
         solver: configuration of the two Poisson solves.
 
@@ -54,7 +55,7 @@ class SurfaceConfig(eqx.Module):
     smooth_eps: Array = hyperparameter(0.02, differentiable=True, lower=0.0, lower_open=True)
     gradient_sigma: Array = hyperparameter(2.5, differentiable=True, lower=0.0, lower_open=True)
     offset: Array = hyperparameter(1.0, differentiable=True, lower=0.0, lower_open=True)
-    confidence_scale: Array = hyperparameter(0.05, differentiable=True, lower=0.0, lower_open=True)
+    confidence_scale: Array = hyperparameter(0.12, differentiable=True, lower=0.0, lower_open=True)
     blur_radius: int = static(8, lower=1, upper=64)
     solver: SolverConfig = SolverConfig()
 
