@@ -9,6 +9,7 @@ from ._lightfield import vertical_epis as vertical_epis
 from ._lightfield import view_offsets as view_offsets
 from ._ssim import ssim_dissimilarity as ssim_dissimilarity
 from ._ssim import ssim_map as ssim_map
+from ._warp import GpuCompileWarning as GpuCompileWarning
 from ._warp import backward_warp as backward_warp
 from ._warp import backward_warp_planar as backward_warp_planar
 from ._warp import forward_project as forward_project

@@ -12,12 +12,43 @@ Two directions:
 from __future__ import annotations
 
 import functools
+import warnings
 
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .._fields import check_lower_bound
+
+
+class GpuCompileWarning(UserWarning):
+    """A projection with the crack fill is compiled for a GPU, where XLA has been measured to
+    compile the crack fill into wrong code (JAX 0.11.2 on an NVIDIA H200: wrong filled pixels
+    in float64 and wrong gradients in float32 and float64; docs/RESULTS.md, "The crack fill
+    compiles to wrong code"). Compare such results with the CPU before relying on them."""
+
+
+def _default_platform() -> str:
+    """The platform that jit-compiled code runs on by default: that of
+    ``jax.config.jax_default_device`` when one is set, else JAX's default backend."""
+    device = jax.config.jax_default_device
+    if device is None:
+        return jax.default_backend()
+    return device if isinstance(device, str) else device.platform
+
+
+def _warn_on_gpu() -> None:
+    """Warn (`GpuCompileWarning`) when the crack fill is traced for a GPU."""
+    if _default_platform() in ("gpu", "cuda", "rocm"):
+        warnings.warn(
+            "the crack fill of the z-buffered projection (forward_project, the cross-hair "
+            "views of the reconstruction, view consistency) is compiled for a GPU, where XLA "
+            "(JAX 0.11.2) has been measured to compile it into wrong code: wrong filled "
+            "pixels in float64 and wrong gradients; compare with the CPU before relying on "
+            "such results (docs/RESULTS.md, 'The crack fill compiles to wrong code')",
+            GpuCompileWarning,
+            stacklevel=2,
+        )
 
 
 def _check_offset(offset) -> tuple[Array, Array]:
@@ -218,6 +249,10 @@ def forward_project(
         ValueError: on a non-2-D disparity, a mask of another shape, a bad offset or a
             negative ``crack_parallax``.
 
+    Warns:
+        GpuCompileWarning: when the crack fill is compiled for a GPU (traced with
+            ``fill_cracks`` while JAX's default device is a GPU).
+
     References:
         Thesis Sec. 6.1 (reprojection with a z-buffer, holes kept for angular inpainting),
         eqs 6.9-6.10 (view consistency).
@@ -257,9 +292,9 @@ def forward_project_views(
     with one z-buffer over all ``K`` frames (flat indices offset per frame), so the program
     holds unbatched scatters only. On an NVIDIA H200 with JAX 0.11.2, XLA compiled the crack
     fill into wrong code (wrong filled pixels in float64, wrong gradients in float32 and
-    float64; the projection without it was right): on a GPU, compare with the CPU before
-    relying on it (`experiments/gpu_projection_check.py`; docs/RESULTS.md, "The crack fill
-    compiles to wrong code").
+    float64; the projection without it was right): on a GPU it warns (`GpuCompileWarning`);
+    compare with the CPU before relying on it (`experiments/gpu_projection_check.py`;
+    docs/RESULTS.md, "The crack fill compiles to wrong code").
 
     Args:
         disparity: ``(K, H, W)`` float disparity of the source view of each projection, or
@@ -278,6 +313,10 @@ def forward_project_views(
     Raises:
         ValueError: on a disparity that is not ``(H, W)`` or ``(K, H, W)``, offsets that are
             not ``(K, 2)``, a mask of another shape or a negative ``crack_parallax``.
+
+    Warns:
+        GpuCompileWarning: when the crack fill is compiled for a GPU (traced with
+            ``fill_cracks`` while JAX's default device is a GPU).
 
     References:
         Thesis Sec. 6.1 (reprojection with a z-buffer), eqs 6.9-6.10 (view consistency).
@@ -316,6 +355,7 @@ def _forward_project(disparity, mask, dr, dc, crack_parallax, *, fill_cracks: bo
     vals, valid, src = _zbuffer(disparity, mask, dr, dc)
     if not fill_cracks:
         return vals, valid
+    _warn_on_gpu()
     return _fill_cracks(vals, valid, src, dr, dc, crack_parallax)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +12,8 @@ import pytest
 from jax.test_util import check_grads
 
 from mvedge_jax.lightfield import (
+    GpuCompileWarning,
+    _warp,
     backward_warp,
     backward_warp_planar,
     forward_project,
@@ -295,3 +298,33 @@ def test_forward_project_views_bad_inputs():
         forward_project_views(np.zeros((3, H, W)), np.zeros((3, 2)), mask=np.ones((2, H, W), bool))
     with pytest.raises(ValueError, match="crack_parallax"):
         forward_project_views(np.zeros((H, W)), np.zeros((3, 2)), crack_parallax=-0.5)
+
+
+@pytest.mark.parametrize(
+    "case, platform, fill_cracks, warns",
+    [
+        (0, "gpu", True, True),
+        (1, "cuda", True, True),
+        (2, "gpu", False, False),
+        (3, "cpu", True, False),
+    ],
+)
+def test_crack_fill_compiled_for_a_gpu_warns(monkeypatch, case, platform, fill_cracks, warns):
+    # The warning is raised when the crack fill is traced for a GPU (a shape of its own per
+    # case, which no other test compiles, so that the projection is traced here).
+    monkeypatch.setattr(_warp, "_default_platform", lambda: platform)
+    d = jnp.zeros((3, 7, 11 + case), jnp.float32).at[:, 3, 5].set(1.0)
+    offsets = jnp.asarray([[0.0, 1.0], [1.0, 0.0], [1.0, 1.0]])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        forward_project_views(d, offsets, fill_cracks=fill_cracks)
+    got = [w for w in caught if issubclass(w.category, GpuCompileWarning)]
+    assert bool(got) == warns, [str(w.message) for w in caught]
+    if warns:
+        assert "wrong code" in str(got[0].message)
+
+
+def test_default_platform_follows_the_default_device():
+    assert _warp._default_platform() == jax.default_backend()
+    with jax.default_device(jax.devices("cpu")[0]):
+        assert _warp._default_platform() == "cpu"
