@@ -292,6 +292,11 @@ class SeedConfig(eqx.Module):
             second-best cost, pixels per view step.
         margin: the hypotheses span the edge labels' disparity range widened by
             this on both sides, pixels per view step.
+        behind_jump: (threshold) within ``min_distance`` of a label, a pixel still gets a
+            sample where its value is farther (smaller) than every label within that
+            distance by more than this, pixels per view step: a surface seen through a gap
+            between nearer ones, such as a strip of the far wall between an object and the
+            floor, whose own texture gave no edge label; 1e9: off.
         steps: (static) number of fronto-parallel hypotheses; 0 turns the samples off.
         scale: (static) reduction factor of the sweep.
         aggregate: (static) radius of the colour-weighted cost aggregation at the reduced
@@ -313,6 +318,7 @@ class SeedConfig(eqx.Module):
     min_contrast: Array = hyperparameter(2e-4, differentiable=False, lower=0.0)
     exclusion: Array = hyperparameter(0.8, differentiable=False, lower=0.0)
     margin: Array = hyperparameter(0.25, differentiable=True, lower=0.0)
+    behind_jump: Array = hyperparameter(1.0, differentiable=False, lower=0.0)
     steps: int = static(49, lower=0, upper=401)
     scale: int = static(2, lower=1, upper=8)
     aggregate: int = static(3, lower=0, upper=64)

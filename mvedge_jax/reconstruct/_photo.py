@@ -645,6 +645,8 @@ def photo_seeds(
     ratio: float | Array = 0.6,
     min_contrast: float | Array = 2e-4,
     sigma: float | Array = 0.1,
+    support_values: Float[Array, "H W"] | None = None,
+    behind_jump: float | Array = 1e9,
 ) -> tuple[Float[Array, "H W"], Bool[Array, "H W"]]:
     """Disparity samples from a global plane sweep where no edge label is near.
 
@@ -657,7 +659,11 @@ def photo_seeds(
     ``min_distance`` pixels (chessboard) from every pixel of ``support`` and its best
     hypothesis is distinct: the lowest cost among the hypotheses more than ``exclusion``
     away from the best is at least ``1 / ratio`` times the best cost and exceeds it by more
-    than ``min_contrast`` (colour units). A flat cost (uniform colour) or a repeated
+    than ``min_contrast`` (colour units). With ``support_values`` (the labels' disparities
+    on ``support``), a pixel within ``min_distance`` of the support also gets a sample where
+    its value is farther (smaller) than every label value within that distance by more than
+    ``behind_jump``: a surface seen through a gap between nearer ones, whose own texture
+    gave no label. A flat cost (uniform colour) or a repeated
     pattern (two minima) gives no sample. The value is the vertex of the parabola through
     the best hypothesis and its neighbours. Not in the thesis (Sec. 8.1.1 names adding
     samples to the edge set as future research); used as an extra data term of the centre diffusion
@@ -679,6 +685,10 @@ def photo_seeds(
         ratio: largest best / second-best cost ratio of a sample.
         min_contrast: smallest second-best minus best cost of a sample.
         sigma: colour scale of the aggregation weights.
+        support_values: optional ``(H, W)`` label disparity on ``support`` (pixels per
+            view step; ignored elsewhere).
+        behind_jump: with ``support_values``, how much farther than every label within
+            ``min_distance`` a sample near the support must be, pixels per view step.
 
     Returns:
         ``(value (H, W), valid (H, W) bool)``: the sample disparity (pixels per view step)
@@ -722,4 +732,15 @@ def photo_seeds(
     near = jnp.pad(support, min_distance)
     for window in ((k, 1), (1, k)):
         near = lax.reduce_window(near, False, lax.bitwise_or, window, (1, 1), "VALID")
-    return value, distinct & ~near
+    if support_values is None:
+        return value, distinct & ~near
+    # Near labels, a sample farther than every label within the window by more than
+    # ``behind_jump``: a surface seen through a gap between nearer ones.
+    big = jnp.asarray(jnp.inf, dt)
+    lowest = jnp.pad(
+        jnp.where(support, support_values.astype(dt), big), min_distance, constant_values=big
+    )
+    for window in ((k, 1), (1, k)):
+        lowest = lax.reduce_window(lowest, big, lax.min, window, (1, 1), "VALID")
+    behind = value < lowest - jnp.asarray(behind_jump, dt)
+    return value, distinct & (~near | behind)

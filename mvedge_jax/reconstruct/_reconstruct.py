@@ -839,7 +839,10 @@ def _centre_seeds(views: Array, edges: EdgeSet, surface, config: ReconstructConf
     rc, cc = U // 2, V // 2
     sd = config.seeds
     qx, qy, use = label_positions(edges, surface, config)
-    support = splat_bilinear(qx, qy, edges.disparity, use.astype(views.dtype), (H, W))[0] > 0
+    label_weight, label_value = splat_bilinear(
+        qx, qy, edges.disparity, use.astype(views.dtype), (H, W)
+    )
+    support = label_weight > 0
     any_label = jnp.any(use)
     low = jnp.where(any_label, jnp.min(jnp.where(use, edges.disparity, jnp.inf)), 0.0)
     high = jnp.where(any_label, jnp.max(jnp.where(use, edges.disparity, -jnp.inf)), 0.0)
@@ -858,6 +861,8 @@ def _centre_seeds(views: Array, edges: EdgeSet, surface, config: ReconstructConf
         exclusion=sd.exclusion,
         ratio=sd.ratio,
         min_contrast=sd.min_contrast,
+        support_values=label_value,
+        behind_jump=sd.behind_jump,
     )
     return jnp.where(valid, sd.weight, 0.0).astype(views.dtype), value.astype(views.dtype)
 
@@ -874,7 +879,8 @@ def centre_seeds(
     `photo_seeds` of the centre view against the other views of the central cross-hair,
     with the hypotheses spanning the disparity range of the edge labels visible in the
     centre view widened by ``config.seeds.margin``; ``support`` are the pixels the labels
-    are splatted onto (at ``p + centre.offset_scale · n``, as in `centre_disparity`). The
+    are splatted onto (at ``p + centre.offset_scale · n``, as in `centre_disparity`), and
+    ``support_values`` their splatted disparities (``config.seeds.behind_jump``). The
     result is `centre_disparity`'s ``seeds`` argument; `reconstruct` adds it with
     ``config.seeds.steps > 0``. Differentiable in ``config.seeds.weight`` and, within
     the hypothesis choice, in the colours. jit-compiled (`equinox.filter_jit`).

@@ -54,6 +54,38 @@ def test_photo_seeds_keep_away_from_labels(small_scene):
     assert valid[~near].mean() > 0.5
 
 
+def test_photo_seeds_near_labels_take_surfaces_behind_them(small_scene):
+    """Within ``min_distance`` of the support, ``support_values`` admit the samples that are
+    farther than every label value within that distance by more than ``behind_jump``, and
+    only those."""
+    lf, _, _ = small_scene
+    views, offsets = cross_hair(lf)
+    gt = np.asarray(lf.centre_gt)
+    support = np.zeros((64, 64), bool)
+    support[::16, ::16] = True
+    args = (lf.centre_view, views, offsets, jnp.asarray(support), -1.2, 1.2)
+    # Every pixel's best hypothesis and whether it is distinct: no support at all.
+    none = jnp.zeros((64, 64), bool)
+    free, free_ok = (np.asarray(a) for a in photo_seeds(*args[:3], none, *args[4:]))
+    _, away = photo_seeds(*args, min_distance=4)
+    near = grey_dilation(support, size=(9, 9))
+    # Label values far nearer than the scene (3.0 against at most 1): near every label
+    # the samples farther by more than 1 come back; none of those within 1 of the labels.
+    nearer = jnp.full((64, 64), 3.0)
+    for jump, expect in ((1.0, free < 2.0), (3.5, free < -0.5), (10.0, np.zeros_like(near))):
+        _, valid = photo_seeds(*args, min_distance=4, support_values=nearer, behind_jump=jump)
+        valid = np.asarray(valid)
+        np.testing.assert_array_equal(valid[~near], np.asarray(away)[~near])
+        np.testing.assert_array_equal(valid[near], (free_ok & expect)[near])
+    assert (free_ok & (free < -0.5))[near].any() and not (free_ok & (free < -0.5))[near].all()
+    # The labels' own values (the scene's truth): a label's value bounds the window, so
+    # with a jump of 0 a sample near it must be farther than the nearest-valued label.
+    truth = jnp.asarray(gt)
+    _, valid = photo_seeds(*args, min_distance=4, support_values=truth, behind_jump=0.0)
+    lowest = -grey_dilation(np.where(support, -gt, -np.inf), size=(9, 9))
+    np.testing.assert_array_equal(np.asarray(valid)[near], (free_ok & (free < lowest))[near])
+
+
 def test_photo_seeds_refuse_uniform_colour_and_repeated_texture(small_scene):
     """Uniform colour: every hypothesis costs the same, no sample. A texture that repeats
     every 8 px horizontally: hypotheses 2 px per view step apart fit equally, no sample."""
