@@ -735,12 +735,12 @@ def photo_seeds(
     if support_values is None:
         return value, distinct & ~near
     # Near labels, a sample farther than every label within the window by more than
-    # ``behind_jump``: a surface seen through a gap between nearer ones.
+    # ``behind_jump``: a surface seen through a gap between nearer ones. The labels' values
+    # only decide which pixels get a sample (no gradient flows through the window minimum).
     big = jnp.asarray(jnp.inf, dt)
-    lowest = jnp.pad(
-        jnp.where(support, support_values.astype(dt), big), min_distance, constant_values=big
-    )
+    labels = lax.stop_gradient(support_values.astype(dt))
+    lowest = jnp.pad(jnp.where(support, labels, big), min_distance, constant_values=big)
     for window in ((k, 1), (1, k)):
         lowest = lax.reduce_window(lowest, big, lax.min, window, (1, 1), "VALID")
-    behind = value < lowest - jnp.asarray(behind_jump, dt)
+    behind = lax.stop_gradient(value) < lowest - jnp.asarray(behind_jump, dt)
     return value, distinct & (~near | behind)
