@@ -225,8 +225,10 @@ class EdgeRefineConfig(eqx.Module):
         tau_v: centre-view visibility angle of eq 4.4, radians (thesis π/10).
         entropy_t, entropy_alpha: proposal scale ``alpha * t**j`` of the random search
             (thesis 0.88, 0.15).
-        sigma_s, sigma_d, sigma_c: trilateral filter widths in pixels, disparity and LAB / 100
-            (thesis 10, 0.1, 0.5). Differentiable.
+        sigma_s, sigma_d, sigma_c: trilateral filter widths in pixels, disparity (pixels per
+            view step) and LAB / 100 (thesis 10, 0.1, 0.5; ``sigma_d`` 0.035 by
+            leave-one-scene-out over the synthetic and HCI scenes, docs/ACCURACY.md).
+            Differentiable.
 
     Raises:
         TypeError, ValueError: on construction, for a value of the wrong type or out of
@@ -256,7 +258,9 @@ class EdgeRefineConfig(eqx.Module):
     sigma_s: Float[Array, ""] = hyperparameter(
         10.0, differentiable=True, lower=0.0, lower_open=True
     )
-    sigma_d: Float[Array, ""] = hyperparameter(0.1, differentiable=True, lower=0.0, lower_open=True)
+    sigma_d: Float[Array, ""] = hyperparameter(
+        0.035, differentiable=True, lower=0.0, lower_open=True
+    )
     sigma_c: Float[Array, ""] = hyperparameter(0.5, differentiable=True, lower=0.0, lower_open=True)
 
     def __check_init__(self):

@@ -525,7 +525,7 @@ class FillConfig(eqx.Module):
         merge and the hole-filling solve are not in the thesis.
     """
 
-    c: Array = hyperparameter(1.0, differentiable=True, lower=0.0)
+    c: Array = hyperparameter(2.0, differentiable=True, lower=0.0)
     data_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
     hole_weight: Array = hyperparameter(1000.0, differentiable=True, lower=0.0)
     min_confidence: Array = hyperparameter(0.5, differentiable=False, lower=0.0)
