@@ -135,7 +135,7 @@ def test_toml_nested_tables_are_strict():
     cfg = config_from_toml("[reconstruct.epi]\nc = 0.3\n[edges.filter]\nn_filters = 31\n")
     assert float(cfg.reconstruct.epi.c) == pytest.approx(0.3)
     assert cfg.edges.filter.n_filters == 31
-    assert float(cfg.reconstruct.fill.c) == 1.0  # same name, other sub-config: untouched
+    assert float(cfg.reconstruct.fill.c) == 2.0  # same name, other sub-config: untouched
     # a flat (pre-nesting) key is an unknown key, named with its table
     with pytest.raises(TypeError, match=r"unknown key reconstruct\.omega; ReconstructConfig has"):
         config_from_toml("[reconstruct]\nomega = 1.0\n")
@@ -174,7 +174,7 @@ def test_paths_get_replace_and_with_values():
         replace_paths(cfg, {"surface.nope": 1.0})
     replaced = replace_paths(cfg, {"reconstruct.epi.c": 0.3})
     assert float(get_path(replaced, "reconstruct.epi.c")) == pytest.approx(0.3)
-    assert float(get_path(replaced, "reconstruct.fill.c")) == 1.0
+    assert float(get_path(replaced, "reconstruct.fill.c")) == 2.0
     with pytest.raises(AttributeError):
         replace_paths(cfg, {"reconstruct.omega": 1.0})
     with pytest.raises(ValueError, match="omega must be >= 0"):
