@@ -35,11 +35,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from error_split import load_scene  # noqa: E402
 from loo_views import (  # noqa: E402
-    REAL_SCENES,
-    SCENES,
     _fmt,
+    add_scene_arguments,
     leave_one_out,
     parse_sets,
+    scene_list,
     score_light_field,
 )
 
@@ -99,20 +99,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--paths", help="comma-separated fields (default: every hyperparameter)")
     ap.add_argument("--factors", default="0.5,2", help="multipliers of the default")
-    ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
-    ap.add_argument(
-        "--real",
-        action="store_true",
-        help=f"also score {', '.join(REAL_SCENES)} (centre view: GT there only)",
-    )
+    add_scene_arguments(ap)
     ap.add_argument("--criterion", choices=("mse", "mse+badpix"), default="mse+badpix")
-    ap.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="P=V",
-        help="array field P of the base configuration set to V (repeatable)",
-    )
     ap.add_argument("--json", help="write every score and row as JSON")
     args = ap.parse_args(argv)
     config = parse_sets(ap, args.set)
@@ -122,11 +110,7 @@ def main(argv=None) -> int:
     if unknown:
         ap.error(f"not hyperparameters of PipelineConfig: {unknown}")
     factors = [float(f) for f in args.factors.split(",")]
-    scenes = [s.strip() for s in args.scenes.split(",")]
-    if args.real:
-        scenes += [s for s in REAL_SCENES if s not in scenes]
-    if len(scenes) < 2 or any(s not in SCENES + REAL_SCENES for s in scenes):
-        ap.error(f"need two or more scenes of {SCENES + REAL_SCENES}; got {scenes}")
+    scenes = scene_list(ap, args)
     light_fields = {s: load_scene(s) for s in scenes}
     base = {s: score_light_field(lf, config) for s, lf in light_fields.items()}
     print("default: " + ", ".join(f"{s} {v[0]:.3f}/{v[1]:.3f}/{v[2]:.2f}" for s, v in base.items()))

@@ -115,6 +115,35 @@ def leave_one_out(scores: dict, values: list[float], criterion: str = "mse") -> 
     return rows
 
 
+def add_scene_arguments(ap: argparse.ArgumentParser) -> None:
+    """The ``--scenes``, ``--real`` and ``--set`` options (read by `scene_list` and
+    `parse_sets`)."""
+    ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
+    ap.add_argument(
+        "--real",
+        action="store_true",
+        help=f"also score {', '.join(REAL_SCENES)} (centre view: GT there only)",
+    )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="P=V",
+        help="array field P of the base configuration set to V (repeatable)",
+    )
+
+
+def scene_list(ap: argparse.ArgumentParser, args: argparse.Namespace) -> list[str]:
+    """The scenes of ``--scenes`` and ``--real``; an argument error unless they are two or more
+    known scenes."""
+    scenes = [s.strip() for s in args.scenes.split(",")]
+    if args.real:
+        scenes += [s for s in REAL_SCENES if s not in scenes]
+    if len(scenes) < 2 or any(s not in SCENES + REAL_SCENES for s in scenes):
+        ap.error(f"need two or more scenes of {SCENES + REAL_SCENES}; got {scenes}")
+    return scenes
+
+
 def parse_sets(ap: argparse.ArgumentParser, sets: list[str]) -> PipelineConfig:
     """`PipelineConfig()` with the array fields of ``--set P=V`` arguments changed."""
     values = {}
@@ -134,25 +163,13 @@ def main(argv=None) -> int:
         "integer, boolean or string field (e.g. reconstruct.sharpen.matte_view_steps)",
     )
     ap.add_argument("values", help="comma-separated values; the first is the reference")
-    ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
-    ap.add_argument(
-        "--real",
-        action="store_true",
-        help=f"also score {', '.join(REAL_SCENES)} (centre view: GT there only)",
-    )
     ap.add_argument(
         "--criterion",
         choices=tuple(CRITERIA),
         default="mse",
         help="mse: all-views and worst-view MSE×100; mse+badpix: and all-views BadPix(0.07)",
     )
-    ap.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="P=V",
-        help="array field P of the base configuration set to V (repeatable)",
-    )
+    add_scene_arguments(ap)
     ap.add_argument("--json", help="write the scores and the table as JSON")
     args = ap.parse_args(argv)
     base = parse_sets(ap, args.set)
