@@ -278,10 +278,10 @@ def _centre_before_after(folder, *configs):
 def test_optimize_antinous_accuracy(data_dir):
     """Full-resolution antinous with the default schedule (~7 min on 2 cores): ``--optimize``
     lowers the Ch. 6 centre map's MSE×100 by at least 10 % and its BadPix(0.07) by at least
-    5 %. Measured 2026-11-28: MSE×100 3.093 → 2.487 (−19.6 %), BadPix(0.07) 8.941 → 8.099
-    (−9.4 %), BadPix(0.03) 27.17 → 24.79. Against the Ch. 6 map of an earlier version
-    (8.02 / 16.31) the same refinement gave 6.52 / 12.06 (−26 %): the sharpened Ch. 6 map
-    leaves less to correct (docs/RESULTS.md, "`--optimize`")."""
+    5 %. Measured 2026-12-07 (`mvedge depth --optimize`): MSE×100 2.790 → 2.480 (−11.1 %),
+    BadPix(0.07) 9.059 → 8.042 (−11.2 %), BadPix(0.03) 28.17 → 25.00. Against the Ch. 6 map of
+    an earlier version (8.02 / 16.31) the same refinement gave 6.52 / 12.06 (−26 %): the
+    sharpened Ch. 6 map leaves less to correct (docs/RESULTS.md, "`--optimize`")."""
     before, [(after, info)] = _centre_before_after(data_dir / "hci4d" / "additional" / "antinous")
     assert info["loss_history"][-1] < info["loss_history"][0]
     assert after["mse_x100"] <= 0.90 * before["mse_x100"], (before, after)
@@ -297,11 +297,11 @@ def test_optimize_backgammon_target(data_dir):
     at least 3 % and BadPix(0.07) lower than Ch. 6, at the price of fine accuracy.
     ``select.min_change = 0.02`` (the optimised value only where it moves by more than that)
     gains as much at 0.07 and keeps BadPix(0.01) within 0.5 points of Ch. 6. Measured
-    2026-12-07, MSE×100 / BadPix(0.07) / BadPix(0.01) / Q25×100: Ch. 6 0.786 / 1.077 /
-    13.88 / 0.177; default 0.746 / 1.032 / 15.23 / 0.203; ``min_change = 0.02`` 0.747 /
-    1.034 / 13.91 / 0.177 (−5.1 % and −5.0 % in MSE×100). The optimised maps are the same
-    without the samples behind nearby labels (``seeds.behind_jump`` off: Ch. 6 0.824, then
-    0.745 and 0.747, −9.6 % and −9.3 %): those samples move the Ch. 6 map, not the optimum.
+    2026-12-07 (`mvedge depth --optimize`), MSE×100 / BadPix(0.07) / BadPix(0.01) / Q25×100:
+    Ch. 6 0.791 / 1.056 / 13.50 / 0.177; default 0.748 / 1.040 / 15.08 / 0.203;
+    ``min_change = 0.02`` 0.749 / 1.038 / 13.58 / 0.177 (−5.4 % and −5.3 % in MSE×100). The
+    optimised maps hardly depend on the Ch. 6 map's last changes: without the samples behind
+    nearby labels (``seeds.behind_jump`` off, Ch. 6 0.824) they were 0.745 and 0.747.
     """
     default = PipelineConfig()
     fine = with_values(default, {"reconstruct.select.min_change": 0.02})
