@@ -196,14 +196,9 @@ def main(argv=None) -> int:
                 f"{args.path!r} is neither an array field of PipelineConfig (see "
                 "hyperparameter_paths) nor a static integer, float, boolean or string field"
             )
-    scenes = [s.strip() for s in args.scenes.split(",")]
-    if args.real:
-        scenes += [s for s in REAL_SCENES if s not in scenes]
-    unknown = [s for s in scenes if s not in SCENES + REAL_SCENES]
-    if unknown or len(values) < 2 or len(scenes) < 2:
-        ap.error(
-            f"need two or more values and two or more scenes of {SCENES + REAL_SCENES}; got {args}"
-        )
+    scenes = scene_list(ap, args)
+    if len(values) < 2:
+        ap.error(f"need two or more values; got {args.values!r}")
     scores = {s: score_views(s, args.path, values, base) for s in scenes}
     rows = leave_one_out(scores, values, args.criterion)
     ref = values[0]
