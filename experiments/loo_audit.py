@@ -1,8 +1,8 @@
 """Leave-one-scene-out audit of the chain's array hyperparameters (whole chain).
 
     python experiments/loo_audit.py [--paths P1,P2,...] [--factors 0.5,2]
-        [--scenes default,thin,...] [--real] [--set P=V ...] [--criterion mse|mse+badpix]
-        [--json OUT]
+        [--scenes default,thin,...] [--real] [--set P=V ...] [--majority]
+        [--criterion mse|mse+badpix] [--json OUT]
 
 Every field of `hyperparameter_paths` (or those of ``--paths``) is tried at its default (that of
 `PipelineConfig()`, or of ``--set P=V`` arguments) and at the default times each factor, clipped
@@ -17,7 +17,8 @@ the geometric mean of the criterion's ratios to the default, scored on the held-
 condensed to one row: how many folds pick a value other than the default, and the geometric
 means over the held-out scenes of the picked values' ratios to the default (all views, worst
 view, BadPix(0.07)). A field whose folds agree on one value and whose held-out means are below
-1 is a candidate for a new default; `loo_views.py` then gives its full table.
+1 is a candidate for a new default; `loo_views.py` then gives its full table. ``--majority``
+takes a value only where it gains on most of the other scenes (see `loo_views.leave_one_out`).
 """
 
 from __future__ import annotations
@@ -75,11 +76,11 @@ def trial_values(config: PipelineConfig, path: str, factors: list[float]) -> lis
     return values if len(values) > 1 else []
 
 
-def audit_row(scores: dict, values: list[float], criterion: str) -> dict:
+def audit_row(scores: dict, values: list[float], criterion: str, majority: bool = False) -> dict:
     """One field's leave-one-out condensed: folds off the default, held-out geometric-mean
     ratios of the picked values to the default (all views, worst view, BadPix(0.07)), the
     values picked and every value's all-views ratio per scene."""
-    rows = leave_one_out(scores, values, criterion)
+    rows = leave_one_out(scores, values, criterion, majority)
     logs = np.zeros(3)
     for r in rows:
         ref, held = r["reference"], r["held_out_score"]
@@ -133,7 +134,7 @@ def main(argv=None) -> int:
             }
             for s, lf in light_fields.items()
         }
-        row = audit_row(scores, values, args.criterion)
+        row = audit_row(scores, values, args.criterion, args.majority)
         out[path] = {
             "values": values,
             "scores": {s: {_fmt(v): sc for v, sc in d.items()} for s, d in scores.items()},
@@ -153,6 +154,7 @@ def main(argv=None) -> int:
                 "scenes": scenes,
                 "criterion": args.criterion,
                 "set": args.set,
+                "majority": args.majority,
                 "default": base,
                 "fields": out,
                 "skipped": skipped,

@@ -1,7 +1,7 @@
 """Leave-one-scene-out of one parameter on every view of the synthetic scenes (whole chain).
 
     python experiments/loo_views.py PATH V0,V1,... [--scenes default,thin,...] [--real]
-        [--set P=V ...] [--criterion mse|mse+badpix] [--json OUT]
+        [--set P=V ...] [--majority] [--criterion mse|mse+badpix] [--json OUT]
 
 ``PATH`` is a field of `PipelineConfig` by dotted path: an array field (`hyperparameter_paths`,
 e.g. ``reconstruct.sharpen.matte_view_jump``) or a static integer, float, boolean (``true``,
@@ -21,6 +21,8 @@ their centre view (its MSE×100 stands for both the all-views and the worst-view
 that a field of the edge or surface stages, which `experiments/reproduce_ch6.py --loo` keeps
 at the default, is also chosen on the real scenes. ``--set P=V`` (repeatable) changes another
 array field of the base configuration, for a second field's grid around a first one's pick.
+``--majority`` lets a fold pick a value only where it gains on most of the other scenes (the
+geometric mean alone lets one scene's large swing outweigh small losses on all the others).
 """
 
 from __future__ import annotations
@@ -95,15 +97,31 @@ def score_views(name: str, path: str, values: list, base: PipelineConfig | None 
 CRITERIA = {"mse": "mse+badpix", "mse+badpix": "all"}
 
 
-def leave_one_out(scores: dict, values: list[float], criterion: str = "mse") -> list[dict]:
-    """Per held-out scene: the value picked on the others and the held-out scores."""
+def leave_one_out(
+    scores: dict, values: list[float], criterion: str = "mse", majority: bool = False
+) -> list[dict]:
+    """Per held-out scene: the value picked on the others and the held-out scores.
+
+    The pick is the value with the lowest geometric mean of the criterion's ratios to the
+    reference over the other scenes. With ``majority``, a value other than the reference is a
+    candidate only where its own ratio (per scene, the geometric mean of the criterion's
+    columns) is below 1 on more than half of the other scenes, so that one scene's large swing
+    cannot decide the pick alone."""
     ref, rows = values[0], []
     # `_ratio`'s geometric mean of the ratios of the criterion's columns to the "default"
     # entry, here the reference value.
     table = {s: {"default": d[ref], **d} for s, d in scores.items()}
+    crit = CRITERIA[criterion]
     for held in scores:
         others = [s for s in scores if s != held]
-        pick = min(values, key=lambda v: _ratio(table, others, v, CRITERIA[criterion]))
+        candidates = [
+            v
+            for v in values
+            if v == ref
+            or not majority
+            or 2 * sum(_ratio(table, [s], v, crit) < 1 for s in others) > len(others)
+        ]
+        pick = min(candidates, key=lambda v: _ratio(table, others, v, crit))
         rows.append(
             {
                 "held_out": held,
@@ -116,8 +134,8 @@ def leave_one_out(scores: dict, values: list[float], criterion: str = "mse") -> 
 
 
 def add_scene_arguments(ap: argparse.ArgumentParser) -> None:
-    """The ``--scenes``, ``--real`` and ``--set`` options (read by `scene_list` and
-    `parse_sets`)."""
+    """The ``--scenes``, ``--real``, ``--set`` and ``--majority`` options (read by
+    `scene_list`, `parse_sets` and `leave_one_out`)."""
     ap.add_argument("--scenes", default=",".join(SCENES), help="synthetic scenes (comma-separated)")
     ap.add_argument(
         "--real",
@@ -130,6 +148,12 @@ def add_scene_arguments(ap: argparse.ArgumentParser) -> None:
         default=[],
         metavar="P=V",
         help="array field P of the base configuration set to V (repeatable)",
+    )
+    ap.add_argument(
+        "--majority",
+        action="store_true",
+        help="a value other than the reference is picked only where it gains on most of the "
+        "other scenes",
     )
 
 
@@ -200,7 +224,7 @@ def main(argv=None) -> int:
     if len(values) < 2:
         ap.error(f"need two or more values; got {args.values!r}")
     scores = {s: score_views(s, args.path, values, base) for s in scenes}
-    rows = leave_one_out(scores, values, args.criterion)
+    rows = leave_one_out(scores, values, args.criterion, args.majority)
     ref = values[0]
     print(f"\ncriterion: {args.criterion}")
     print(
@@ -225,6 +249,7 @@ def main(argv=None) -> int:
             "values": values,
             "criterion": args.criterion,
             "set": args.set,
+            "majority": args.majority,
             "scores": {s: {_fmt(v): sc for v, sc in d.items()} for s, d in scores.items()},
             "loo": rows,
         }
