@@ -24,7 +24,6 @@ takes a value only where it gains on most of the other scenes (see `loo_views.le
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import sys
@@ -44,11 +43,11 @@ from loo_views import (  # noqa: E402
     score_light_field,
 )
 
-from mvedge_jax._fields import field_spec  # noqa: E402
 from mvedge_jax.pipeline import (  # noqa: E402
     PipelineConfig,
     get_path,
     hyperparameter_paths,
+    path_spec,
     with_values,
 )
 
@@ -59,10 +58,7 @@ def trial_values(config: PipelineConfig, path: str, factors: list[float]) -> lis
     default = float(get_path(config, path))
     if default == 0.0 or not math.isfinite(default):
         return []
-    owner, _, name = path.rpartition(".")
-    spec = field_spec(
-        next(f for f in dataclasses.fields(get_path(config, owner)) if f.name == name)
-    )
+    spec = path_spec(config, path)
     values = [default]
     for f in factors:
         v = default * f
@@ -78,8 +74,8 @@ def trial_values(config: PipelineConfig, path: str, factors: list[float]) -> lis
 
 def audit_row(scores: dict, values: list[float], criterion: str, majority: bool = False) -> dict:
     """One field's leave-one-out condensed: folds off the default, held-out geometric-mean
-    ratios of the picked values to the default (all views, worst view, BadPix(0.07)), the
-    values picked and every value's all-views ratio per scene."""
+    ratios of the picked values to the default (all views, worst view, BadPix(0.07)) and the
+    value each fold picks."""
     rows = leave_one_out(scores, values, criterion, majority)
     logs = np.zeros(3)
     for r in rows:
@@ -89,10 +85,6 @@ def audit_row(scores: dict, values: list[float], criterion: str, majority: bool 
         "folds_off_default": sum(r["picked"] != values[0] for r in rows),
         "held_out_ratio": [float(math.exp(x / len(rows))) for x in logs],
         "picked": {r["held_out"]: r["picked"] for r in rows},
-        "all_views_ratio": {
-            _fmt(v): {s: scores[s][v][0] / scores[s][values[0]][0] for s in scores}
-            for v in values[1:]
-        },
     }
 
 

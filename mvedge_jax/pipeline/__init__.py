@@ -24,6 +24,7 @@ from ._config import config_to_dict as config_to_dict
 from ._config import config_to_toml as config_to_toml
 from ._config import get_path as get_path
 from ._config import hyperparameter_paths as hyperparameter_paths
+from ._config import path_spec as path_spec
 from ._config import replace_paths as replace_paths
 from ._config import smooth_config as smooth_config
 from ._config import with_values as with_values

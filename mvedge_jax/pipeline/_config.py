@@ -108,6 +108,21 @@ def get_path(config: eqx.Module, path: str):
     return value
 
 
+def path_spec(config: eqx.Module, path: str):
+    """The declared `FieldSpec` (type, bounds, differentiability) of the field at a dotted
+    path, or ``None`` for a field declared without one.
+
+    Raises:
+        AttributeError: where the path names no config or no field of it.
+    """
+    owner, _, name = path.rpartition(".")
+    parent = get_path(config, owner) if owner else config
+    for f in dataclasses.fields(parent):
+        if f.name == name:
+            return field_spec(f)
+    raise AttributeError(f"{type(parent).__name__} has no field {name!r} (path {path!r})")
+
+
 def replace_paths(config: eqx.Module, values: dict) -> eqx.Module:
     """``config`` with the fields at the dotted paths of ``values`` replaced (traceable: the
     values may be tracers, so this works inside ``jit``, ``grad`` and ``vmap``; numbers

@@ -8,7 +8,6 @@ of a `PipelineConfig`, and takes Adam steps (optax). It returns a `PipelineConfi
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import time
@@ -21,7 +20,6 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
-from .._fields import field_spec
 from .._memory import CHAIN_MAPPINGS, ensure_mapping_headroom
 from ..edges import check_cross_hair
 from ..lightfield import LightField
@@ -31,6 +29,7 @@ from ._config import (
     PipelineConfig,
     get_path,
     hyperparameter_paths,
+    path_spec,
     replace_paths,
     with_values,
 )
@@ -47,9 +46,7 @@ def _parametrisation(config: PipelineConfig, path: str) -> tuple[bool, float, fl
     one ulp of float32), and for a logarithm the range whose exponential stays a finite,
     normal float32.
     """
-    owner, _, name = path.rpartition(".")
-    f = next(f for f in dataclasses.fields(get_path(config, owner)) if f.name == name)
-    spec = field_spec(f)
+    spec = path_spec(config, path)
     lower = None if spec is None else spec.lower
     upper = None if spec is None else spec.upper
     info = np.finfo(np.float32)

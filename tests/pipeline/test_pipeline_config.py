@@ -29,6 +29,7 @@ from mvedge_jax.pipeline import (
     config_to_toml,
     get_path,
     hyperparameter_paths,
+    path_spec,
     replace_paths,
     smooth_config,
     with_values,
@@ -157,6 +158,19 @@ def test_cli_config_dump_reads_back(tmp_path):
     assert "[reconstruct.centre]" in res.output and "[edges.filter]" in res.output
     assert float(config_from_toml(res.output).reconstruct.centre.omega) == 42.0
     assert runner.invoke(main, ["config"]).exit_code != 0
+
+
+def test_path_spec_gives_the_declared_bounds():
+    cfg = PipelineConfig()
+    ratio = path_spec(cfg, "reconstruct.seeds.ratio")
+    assert (ratio.lower, ratio.upper, ratio.differentiable) == (0.0, 1.0, False)
+    sigma_d = path_spec(cfg, "edges.refine.sigma_d")
+    assert sigma_d.lower == 0.0 and sigma_d.lower_open and sigma_d.differentiable
+    assert path_spec(cfg, "edges.refine.trilateral").kind == "bool"
+    with pytest.raises(AttributeError, match="no field 'nope'"):
+        path_spec(cfg, "edges.refine.nope")
+    with pytest.raises(AttributeError):
+        path_spec(cfg, "edges.nope.sigma_d")
 
 
 def test_paths_get_replace_and_with_values():
