@@ -202,6 +202,13 @@ class SharpenConfig(eqx.Module):
             mean (not in the thesis).
         matte_view_foreground_fit, matte_view_background_fit: the same for the maps of the
             other views (``matte_views``).
+        matte_view_split: `boundary_matte`'s ``split_background`` for the maps of the
+            other views (``matte_views``): where a window's background side holds two
+            surfaces of distinct colours (a strip of far background between a near object
+            and a nearer floor, seen past the centre view's occlusions), a pixel on it is
+            matted against the one whose two-colour model explains its colour best and
+            takes that one's disparity, instead of the two surfaces' mixed means (not in
+            the thesis). Needs ``matte_view_background_fit`` at 0.
         matte_radius: window radius of `boundary_matte`.
         matte_sigma: distance scale of its colour means, pixels.
         matte_colour: the colours of its two-colour mixture model: ``"linear"`` (sRGB
@@ -264,6 +271,7 @@ class SharpenConfig(eqx.Module):
     matte_background_fit: float = static(0.0, lower=0.0)
     matte_view_foreground_fit: float = static(1.0, lower=0.0)
     matte_view_background_fit: float = static(0.0, lower=0.0)
+    matte_view_split: bool = static(False)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
     matte_colour: str = static("linear", choices=MATTE_COLOURS)
@@ -274,6 +282,12 @@ class SharpenConfig(eqx.Module):
             raise ValueError(
                 f"SharpenConfig.sweep_steps must be 0 (off) or an odd integer >= 3; "
                 f"got {self.sweep_steps}"
+            )
+        if self.matte_view_split and self.matte_view_background_fit > 0:
+            raise ValueError(
+                "SharpenConfig.matte_view_split splits the background side's mean colours; "
+                "it needs matte_view_background_fit = 0 (got "
+                f"{self.matte_view_background_fit}); set matte_view_split = false to fit"
             )
 
 

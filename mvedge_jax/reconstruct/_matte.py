@@ -31,6 +31,7 @@ def boundary_matte(
     align_tolerance: float | Array = 0.1,
     foreground_fit: float = 0.0,
     background_fit: float = 0.0,
+    split_background: bool = False,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -84,6 +85,25 @@ def boundary_matte(
     it; the fit reads it at the pixel itself. Larger values follow the gradient more
     closely; 0 is the mean. With ``others``, every view's sides are fitted alike.
 
+    With ``split_background``, a background side that itself spans more than ``jump`` over
+    the window's pure pixels (three surfaces, e.g. a strip of far wall between a near object
+    and a nearer floor) is split at its own mid-range into a far and a near part, each with
+    its own mean colour and disparity. Where the far part's colour lies farther than
+    ``min_separation`` from the segment between the near part's colour and ``F`` (a third
+    colour, not a mixture of the other two: a run of wrong far values along the boundary of
+    the near part is one), a pixel on the background side is matted against the part whose
+    two-colour model explains its colour better (the smaller squared distance of its colour
+    from the segment between that part's colour and ``F``), and when decided to the
+    background takes that part's mean disparity. Foreground pixels, and every pixel where
+    the parts are not distinct, use the whole side as without the split. Where
+    ``background`` holds, it replaces the colour of the part that holds the 3×3 window's
+    farthest disparity. ``F`` in these two tests is the foreground side's window mean (also
+    with ``foreground_fit``); the pixel is then matted against the chosen part as against
+    a whole side. Only this view's colours are split (not ``others``), and only at the first
+    ``max(1024, H·W / 256)`` pixels in row-major order that may choose a part (the others
+    keep the whole side). Without the split the two background surfaces' mixed mean colour
+    can resemble the foreground's, and their mean disparity lies between them.
+
     One pass; jit/vmap-able. Not differentiable in the side chosen (a selection); the output
     is piecewise a weighted mean of the input.
 
@@ -120,6 +140,8 @@ def boundary_matte(
         foreground_fit, background_fit: strength of the linear fit of the foreground /
             background side's colours (static float, finite, >= 0; the inverse of the ridge
             on the fit's gradient, 1 / (weight units × pixels²)); 0: the side's mean.
+        split_background: split a background side that holds two surfaces of distinct
+            colours (static bool; requires ``background_fit = 0``).
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -128,7 +150,8 @@ def boundary_matte(
         ValueError: on a non-2-D disparity, a guide of another ``(H, W)``, ``radius < 1`` or
             ``spatial_sigma <= 0``, or ``background`` / ``background_valid`` of another shape
             or given without the other, or ``others`` / ``other_weights`` likewise, or a
-            fit strength that is negative or not finite.
+            fit strength that is negative or not finite, or ``split_background`` with
+            ``background_fit`` above 0.
     """
     d = jnp.asarray(disparity)
     g = jnp.asarray(guide, d.dtype)
@@ -147,6 +170,8 @@ def boundary_matte(
             raise ValueError(
                 f"{name} must be finite and >= 0 (0: the window mean); got {strength[side]}"
             )
+    if split_background and strength["b"] > 0:
+        raise ValueError("split_background needs background_fit = 0 (the side's mean colours)")
     H, W = d.shape
     if (background is None) != (background_valid is None):
         raise ValueError("background and background_valid must be given together")
@@ -177,6 +202,13 @@ def boundary_matte(
     lo1, hi1 = _window_extrema(d, 1)
     purity = jnp.where((hi1 - lo1) > jump, jnp.asarray(impure_weight, d.dtype), 1.0)
     mid = 0.5 * (lo + hi)
+    if split_background:
+        # The background side's own range over the window's pure pixels (the pixel itself
+        # excluded, as in the means below); where it spans more than ``jump``, its far
+        # part lies at or below ``mid_b``. Elsewhere ``mid_b`` is +inf and the near part
+        # stays empty.
+        bg_hi = _background_extent(d, (hi1 - lo1) <= jump, mid, radius)
+        mid_b = jnp.where(bg_hi - lo > jump, 0.5 * (lo + bg_hi), jnp.inf)
 
     r = radius
     C = g.shape[-1]
@@ -234,14 +266,27 @@ def boundary_matte(
         return [x / jnp.maximum(w0, tiny) for x in c0]
 
     F, B = side_colour("f", wf, cf), side_colour("b", wb, cb)
+    chosen = None
+    if split_background:
+        chosen, part_colour, part_w, part_d = _split_background(
+            d, mid, mid_b, lo1, [x[0] for x in gc], d_p, [x[0] for x in g_p], p_p, r,
+            spatial_sigma, min_separation, background, background_valid,
+        )  # fmt: skip
+        B = [x.at[0].set(jnp.where(chosen, y, x[0])) for x, y in zip(B, part_colour, strict=True)]
+        wb, db = jnp.where(chosen, part_w, wb), jnp.where(chosen, part_d, db)
     if background is not None:  # this view's background only (index 0)
-        B = [
-            x.at[0].set(jnp.where(background_valid, background[..., c], x[0]))
-            for c, x in enumerate(B)
-        ]
-    sep = [F[c] - B[c] for c in range(C)]
-    sep_all = sum(x * x for x in sep)
-    alpha_all = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep_all, tiny)
+        # A pixel that chose a part has the observed colour in that part already, or the
+        # observed surface is the other part.
+        where = background_valid if chosen is None else background_valid & ~chosen
+        B = [x.at[0].set(jnp.where(where, background[..., c], x[0])) for c, x in enumerate(B)]
+
+    def model(B):
+        sep = [F[c] - B[c] for c in range(C)]
+        sep_all = sum(x * x for x in sep)
+        alpha_all = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep_all, tiny)
+        return sep, sep_all, alpha_all
+
+    sep, sep_all, alpha_all = model(B)
     sep2, alpha = sep_all[0], alpha_all[0]
     sep, gc, B = [x[0] for x in sep], [x[0] for x in gc], [x[0] for x in B]
     # Two-colour model test: the pixel's colour must lie near the line through B and F.
@@ -268,6 +313,132 @@ def boundary_matte(
     side = jnp.where(alpha > 0.5, d_f, d_b)
     move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
     return jnp.where(decide & move, side, d)
+
+
+def _background_extent(d: Array, pure: Array, mid: Array, radius: int) -> Array:
+    """Largest disparity at or below ``mid`` of the ``pure`` pixels (off every
+    discontinuity) over each pixel's ``(2 radius + 1)²`` window, the pixel itself excluded
+    (edge-replicated border; ``-inf`` where there is none). Only pure pixels count: a value
+    between two surfaces on their boundary (a blend) is not a third surface."""
+    H, W = d.shape
+    r = radius
+    d_p = edge_pad(jnp.where(pure, d, -jnp.inf), r)
+    out = jnp.full_like(d, -jnp.inf)
+    for a in range(-r, r + 1):
+        for b in range(-r, r + 1):
+            if a == 0 and b == 0:
+                continue
+            ds = d_p[r + a : r + a + H, r + b : r + b + W]
+            out = jnp.maximum(out, jnp.where(ds <= mid, ds, -jnp.inf))
+    return out
+
+
+def _split_background(
+    d, mid, mid_b, lo1, gc, d_p, g_p, p_p, r, spatial_sigma, min_separation, background,
+    background_valid,
+):  # fmt: skip
+    """`boundary_matte`'s ``split_background`` for this view (index 0 of its stacks).
+
+    The pixels that may choose a part (a finite ``mid_b``, on the background side) are few:
+    their window sums are gathered for a fixed-size list of them (the first
+    ``max(4096, H·W / 16)`` in row-major order; the others keep the whole side), and only
+    from the padded inputs, not from `boundary_matte`'s full-frame sums, which XLA's CPU
+    backend would recompute for every such use (the matte then takes several times as
+    long). The foreground colour of the part test is the window mean of the foreground
+    side's pixels.
+
+    Args: the maps of `boundary_matte` (``gc``: this view's colour planes; ``d_p``, ``g_p``,
+    ``p_p``: the map, this view's colour planes and the purities, padded by ``r``).
+
+    Returns:
+        ``(chosen, colour, weight, weighted_disparity)``: ``(H, W)`` bool, the pixels that
+        chose a part, and that part's colour planes (a list of ``(H, W)``), weight and
+        weighted disparity sums there (0 elsewhere).
+    """
+    H, W = d.shape
+    n = H * W
+    Wp = W + 2 * r
+    C = len(gc)
+    capacity = min(n, max(1024, -(-n // 256)))
+    may_choose = jnp.isfinite(mid_b) & (d <= mid)
+    idx = pixel_subset(may_choose.ravel(), capacity)  # padded with n
+    at = jnp.minimum(idx, n - 1)
+    iy, ix = at // W, at % W
+
+    def pick(x):
+        return x.ravel()[at]
+
+    threshold, upper = pick(mid_b), pick(mid)
+    zeros = jnp.zeros(idx.shape, d.dtype)
+    w0 = w1 = d1 = w2 = d2 = zeros
+    c0 = [zeros] * C
+    c1 = [zeros] * C
+    c2 = [zeros] * C
+    flat_d, flat_p, flat_g = d_p.ravel(), p_p.ravel(), [x.ravel() for x in g_p]
+    for a in range(-r, r + 1):
+        for b in range(-r, r + 1):
+            if a == 0 and b == 0:
+                continue
+            s = float(np.exp(-(a * a + b * b) / (2.0 * spatial_sigma**2)))
+            fi = (iy + r + a) * Wp + (ix + r + b)
+            ds = flat_d[fi]
+            w = s * flat_p[fi]
+            far = ds <= threshold
+            fg = ds > upper
+            w_0 = jnp.where(fg, w, 0.0)
+            w_1 = jnp.where(far, w, 0.0)
+            w_2 = jnp.where(far | fg, 0.0, w)
+            w0, w1, w2 = w0 + w_0, w1 + w_1, w2 + w_2
+            d1, d2 = d1 + w_1 * ds, d2 + w_2 * ds
+            for c in range(C):
+                gs = flat_g[c][fi]
+                c0[c] = c0[c] + w_0 * gs
+                c1[c] = c1[c] + w_1 * gs
+                c2[c] = c2[c] + w_2 * gs
+    tiny = jnp.asarray(1e-12, d.dtype)
+    f = [x / jnp.maximum(w0, tiny) for x in c0]
+    B_far = [x / jnp.maximum(w1, tiny) for x in c1]
+    B_near = [x / jnp.maximum(w2, tiny) for x in c2]
+    col = [pick(x) for x in gc]
+    # Distinct parts: the far part's colour lies farther than ``min_separation`` from the
+    # segment between the near part's and F (a third colour; a run of wrong far values
+    # along the boundary between the near part and the foreground mixes those two).
+    axis = [f[c] - B_near[c] for c in range(C)]
+    t = sum((B_far[c] - B_near[c]) * axis[c] for c in range(C))
+    t = jnp.clip(t / jnp.maximum(sum(x * x for x in axis), tiny), 0.0, 1.0)
+    off_segment = sum((B_far[c] - B_near[c] - t * axis[c]) ** 2 for c in range(C))
+    distinct = (idx < n) & (w0 > 0) & (w1 > 0) & (w2 > 0) & (off_segment > min_separation**2)
+    if background is not None:
+        # The observed background is the 3×3 window's farthest surface: the far part's,
+        # unless that surface lies in the near part (the far one is then off the 3×3).
+        valid = pick(background_valid)
+        observed_near = pick(lo1) > threshold
+        colour = [background[..., c].ravel()[at] for c in range(C)]
+        B_far = [
+            jnp.where(valid & ~observed_near, o, x) for o, x in zip(colour, B_far, strict=True)
+        ]
+        B_near = [
+            jnp.where(valid & observed_near, o, x) for o, x in zip(colour, B_near, strict=True)
+        ]
+
+    def segment_distance(Bk):  # the pixel's colour from the segment between Bk and F
+        sep = [f[c] - Bk[c] for c in range(C)]
+        alpha = sum((col[c] - Bk[c]) * sep[c] for c in range(C))
+        alpha = jnp.clip(alpha / jnp.maximum(sum(x * x for x in sep), tiny), 0.0, 1.0)
+        return sum((col[c] - Bk[c] - alpha * sep[c]) ** 2 for c in range(C))
+
+    near = segment_distance(B_near) < segment_distance(B_far)
+
+    def frame(value):
+        return jnp.zeros((n,), value.dtype).at[idx].set(value, mode="drop").reshape(H, W)
+
+    colour = [frame(jnp.where(near, x2, x1)) for x2, x1 in zip(B_near, B_far, strict=True)]
+    return (
+        frame(distinct),
+        colour,
+        frame(jnp.where(near, w2, w1)),
+        frame(jnp.where(near, d2, d1)),
+    )
 
 
 def _fit_at_pixel(

@@ -554,12 +554,15 @@ def _matte(
     background: tuple[Array, Array] | None = None,
     others: tuple[Array, Array] | None = None,
     fits: tuple[float, float] = (0.0, 0.0),
+    split: bool = False,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
     optionally an observed ``(background colour, valid)`` (`observed_background`) and other
     views' ``(colours, weights)`` (`near_surface_colours`), and the ``(foreground,
-    background)`` strengths of the sides' colour fits (``*_fit``)."""
+    background)`` strengths of the sides' colour fits (``*_fit``), and whether a background
+    side that holds two surfaces is split (``split``, `boundary_matte`'s
+    ``split_background``)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     other, weight = (None, None) if others is None else others
@@ -580,6 +583,7 @@ def _matte(
         align_tolerance=sc.matte_align_tolerance,
         foreground_fit=fits[0],
         background_fit=fits[1],
+        split_background=split,
     )
 
 
@@ -626,7 +630,9 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         return _map_views(
-            lambda pair: _matte(pair[0], pair[1], config, jump, snap, fits=fits),
+            lambda pair: _matte(
+                pair[0], pair[1], config, jump, snap, fits=fits, split=sc.matte_view_split
+            ),
             (disparity[r_j, c_j], own),
             disparity,
             present,
@@ -668,7 +674,9 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     def one(args):
         d, guide, f, col, ok = args
         background = samples_to_frame(f, col, ok, (H, W))
-        return _matte(d, guide, config, jump, snap, background, fits=fits)
+        return _matte(
+            d, guide, config, jump, snap, background, fits=fits, split=sc.matte_view_split
+        )
 
     inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid)
     return _map_views(one, inputs, disparity, present, (r_j, c_j))

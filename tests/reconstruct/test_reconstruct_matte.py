@@ -750,3 +750,106 @@ def test_views_matte_keeps_the_map_of_a_view_without_an_image(steps):
     assert not np.array_equal(out[0, 0], d[0, 0])
     if steps == 0:
         np.testing.assert_array_equal(out[0, 0], np.asarray(alone))
+
+
+NEAR, WALL, FLOOR = 2.8, -3.4, -1.5
+NEAR_RGB, WALL_RGB, FLOOR_RGB = (0.05, 0.35, 0.1), (0.05, 0.05, 0.6), (0.2, 0.9, 0.2)
+
+
+def _strip_scene(strip_rgb, strip_value=WALL, size: int = 20):
+    """A near object (rows 0–9) above a one-pixel strip (row 10) above a floor (rows 11–):
+    the strip is the far wall seen between them (three surfaces in every window that holds
+    it). Returns the map (the strip at ``strip_value``) and the colours in linear light."""
+    rows = np.arange(size)
+    d = np.where(rows < 10, NEAR, np.where(rows == 10, strip_value, FLOOR)).astype(np.float32)
+    d = np.broadcast_to(d[:, None], (size, size)).copy()
+    rgb = np.where(
+        (rows < 10)[:, None], NEAR_RGB, np.where((rows == 10)[:, None], strip_rgb, FLOOR_RGB)
+    )
+    img = np.broadcast_to(rgb[:, None, :], (size, size, 3)).astype(np.float32)
+    return d, img
+
+
+def _views_matte(d, img, split):
+    # The views' matte settings: every decided pixel takes its side's mean (snap 0).
+    return np.asarray(
+        boundary_matte(jnp.asarray(d), jnp.asarray(img), jump=0.5, snap=0.0, split_background=split)
+    )
+
+
+def test_matte_split_keeps_a_strip_of_far_wall_between_two_nearer_surfaces():
+    # The wall's own colour (not a mixture of the object's and the floor's): the whole
+    # background side (wall and floor) has a mean colour and disparity of neither.
+    d, img = _strip_scene(WALL_RGB)
+    whole = _views_matte(d, img, split=False)
+    split = _views_matte(d, img, split=True)
+    np.testing.assert_allclose(split, d, atol=1e-5)
+    assert np.abs(whole - d).max() > 0.5  # the strip or the floor next to it is moved
+
+
+def test_matte_split_ignores_a_strip_whose_colour_mixes_its_neighbours():
+    # A run of wrong far values along the object's lower edge, with the colour of a pixel
+    # mixing the object and the floor: not a third surface, so the whole side is used.
+    mixed = tuple(0.5 * (a + b) for a, b in zip(NEAR_RGB, FLOOR_RGB, strict=True))
+    d, img = _strip_scene(mixed)
+    # Equal up to rounding: the whole side's sums are the two parts' sums added.
+    np.testing.assert_allclose(_views_matte(d, img, True), _views_matte(d, img, False), atol=1e-5)
+
+
+@pytest.mark.parametrize("edge", [10.3, 10.7])
+def test_matte_split_of_two_surfaces_is_the_matte(edge):
+    gt, img = _edge_scene(edge)
+    d = np.roll(gt, 1, axis=1)
+    d[:, :2], d[:, -2:] = FG, BG
+    np.testing.assert_array_equal(_views_matte(d, img, True), _views_matte(d, img, False))
+
+
+def test_matte_split_needs_the_mean_colours():
+    gt, img = _edge_scene(10.3)
+    with pytest.raises(ValueError, match="background_fit"):
+        boundary_matte(jnp.asarray(gt), jnp.asarray(img), split_background=True, background_fit=1.0)
+    with pytest.raises(ValueError, match="matte_view_background_fit"):
+        SharpenConfig(matte_view_background_fit=1.0, matte_view_split=True)
+    SharpenConfig(matte_view_background_fit=1.0)
+
+
+def test_views_matte_splits_the_background_when_configured():
+    # `SharpenConfig.matte_view_split` reaches the views' matte (and only it: the centre
+    # view is not matted there).
+    from mvedge_jax.reconstruct import ReconstructConfig
+    from mvedge_jax.reconstruct._reconstruct import _matte_views
+
+    d, img = _strip_scene(WALL_RGB)
+    maps = np.broadcast_to(d, (3, 3, *d.shape)).copy()
+    views = np.broadcast_to(linear_to_srgb(img), (3, 3, *img.shape)).copy()
+    present = jnp.ones((3, 3), bool)
+
+    def run(split):
+        config = ReconstructConfig(
+            sharpen=SharpenConfig(matte_view_steps=0, matte_view_split=split)
+        )
+        guides = colour_guide(jnp.asarray(views), config.colour_space)
+        return np.asarray(
+            _matte_views(jnp.asarray(maps), jnp.asarray(views), guides, present, config)
+        )
+
+    split, whole = run(True), run(False)
+    np.testing.assert_allclose(split[0, 0], d, atol=1e-5)
+    assert np.abs(whole[0, 0] - d).max() > 0.5
+    np.testing.assert_array_equal(split[1, 1], d)
+
+
+def test_matte_split_gradient_matches_finite_differences():
+    # Piecewise a weighted mean of the input map: away from a change of decision, the
+    # gradient with respect to the map is the weights' (the chosen part's mean included).
+    from jax.test_util import check_grads
+
+    d, img = _strip_scene(WALL_RGB, size=12)
+    d = d + np.random.default_rng(0).uniform(-0.05, 0.05, d.shape).astype(np.float32)
+    guide = jnp.asarray(img)
+
+    def matte(x):
+        return boundary_matte(x, guide, jump=0.5, snap=0.0, split_background=True)
+
+    assert np.abs(np.asarray(matte(jnp.asarray(d))) - d).max() > 0.01  # the means are taken
+    check_grads(matte, (jnp.asarray(d),), order=1, modes=["rev"], eps=1e-3, atol=2e-2, rtol=2e-2)
