@@ -17,6 +17,7 @@ from ._crosshair import solve_epis as solve_epis
 from ._matte import boundary_matte as boundary_matte
 from ._matte import near_surface_colours as near_surface_colours
 from ._matte import observed_background as observed_background
+from ._matte import split_candidates as split_candidates
 from ._oracle import OracleSurface as OracleSurface
 from ._oracle import oracle_edges as oracle_edges
 from ._photo import photo_cost as photo_cost

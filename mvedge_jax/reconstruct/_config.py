@@ -271,7 +271,7 @@ class SharpenConfig(eqx.Module):
     matte_background_fit: float = static(0.0, lower=0.0)
     matte_view_foreground_fit: float = static(1.0, lower=0.0)
     matte_view_background_fit: float = static(0.0, lower=0.0)
-    matte_view_split: bool = static(False)
+    matte_view_split: bool = static(True)
     matte_radius: int = static(2, lower=1, upper=64)
     matte_sigma: float = static(1.0, lower=0.0, lower_open=True)
     matte_colour: str = static("linear", choices=MATTE_COLOURS)

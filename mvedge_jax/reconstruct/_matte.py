@@ -32,6 +32,7 @@ def boundary_matte(
     foreground_fit: float = 0.0,
     background_fit: float = 0.0,
     split_background: bool = False,
+    split_pixels: Int[ArrayLike, " K"] | None = None,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -99,10 +100,11 @@ def boundary_matte(
     ``background`` holds, it replaces the colour of the part that holds the 3×3 window's
     farthest disparity. ``F`` in these two tests is the foreground side's window mean (also
     with ``foreground_fit``); the pixel is then matted against the chosen part as against
-    a whole side. Only this view's colours are split (not ``others``), and only at the first
-    ``max(1024, H·W / 256)`` pixels in row-major order that may choose a part (the others
-    keep the whole side). Without the split the two background surfaces' mixed mean colour
-    can resemble the foreground's, and their mean disparity lies between them.
+    a whole side. Only this view's colours are split (not ``others``), and only at the
+    listed pixels (``split_pixels``; by default the first ``max(1024, H·W / 256)`` in
+    row-major order that may choose a part, `split_candidates`; the others keep the whole
+    side). Without the split the two background surfaces' mixed mean colour can resemble
+    the foreground's, and their mean disparity lies between them.
 
     One pass; jit/vmap-able. Not differentiable in the side chosen (a selection); the output
     is piecewise a weighted mean of the input.
@@ -142,6 +144,11 @@ def boundary_matte(
             on the fit's gradient, 1 / (weight units × pixels²)); 0: the side's mean.
         split_background: split a background side that holds two surfaces of distinct
             colours (static bool; requires ``background_fit = 0``).
+        split_pixels: ``(K,)`` int, the row-major flat indices of the pixels that may
+            choose a part (`split_candidates`, padded with ``H·W``), with
+            ``split_background``; ``None``: `split_candidates` of ``disparity`` here. A list
+            made before a loop over views is materialised once, where XLA's CPU backend
+            would recompute the candidates' window pass inside this function.
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -203,12 +210,11 @@ def boundary_matte(
     purity = jnp.where((hi1 - lo1) > jump, jnp.asarray(impure_weight, d.dtype), 1.0)
     mid = 0.5 * (lo + hi)
     if split_background:
-        # The background side's own range over the window's pure pixels (the pixel itself
-        # excluded, as in the means below); where it spans more than ``jump``, its far
-        # part lies at or below ``mid_b``. Elsewhere ``mid_b`` is +inf and the near part
-        # stays empty.
-        bg_hi = _background_extent(d, (hi1 - lo1) <= jump, mid, radius)
-        mid_b = jnp.where(bg_hi - lo > jump, 0.5 * (lo + bg_hi), jnp.inf)
+        if split_pixels is None:
+            split_pixels = split_candidates(d, radius=radius, jump=jump)
+        split_pixels = jnp.asarray(split_pixels, jnp.int32)
+        if split_pixels.ndim != 1:
+            raise ValueError(f"split_pixels must have shape (K,); got {tuple(split_pixels.shape)}")
 
     r = radius
     C = g.shape[-1]
@@ -269,8 +275,9 @@ def boundary_matte(
     chosen = None
     if split_background:
         chosen, part_colour, part_w, part_d = _split_background(
-            d, mid, mid_b, lo1, [x[0] for x in gc], d_p, [x[0] for x in g_p], p_p, r,
-            spatial_sigma, min_separation, background, background_valid,
+            d, split_pixels, jump, mid, lo1, hi1, [x[0] for x in gc], d_p,
+            [x[0] for x in g_p], p_p, r, spatial_sigma, min_separation, background,
+            background_valid,
         )  # fmt: skip
         B = [x.at[0].set(jnp.where(chosen, y, x[0])) for x, y in zip(B, part_colour, strict=True)]
         wb, db = jnp.where(chosen, part_w, wb), jnp.where(chosen, part_d, db)
@@ -333,19 +340,68 @@ def _background_extent(d: Array, pure: Array, mid: Array, radius: int) -> Array:
     return out
 
 
-def _split_background(
-    d, mid, mid_b, lo1, gc, d_p, g_p, p_p, r, spatial_sigma, min_separation, background,
-    background_valid,
-):  # fmt: skip
-    """`boundary_matte`'s ``split_background`` for this view (index 0 of its stacks).
+def split_candidates(
+    disparity: Float[ArrayLike, "H W"],
+    *,
+    radius: int = 2,
+    jump: float | Array = 0.2,
+    capacity: int | None = None,
+) -> Int[Array, " K"]:
+    """The pixels where `boundary_matte` with ``split_background`` may split a background
+    side: on the background side of a ``(2 radius + 1)²`` window whose background pixels off
+    every discontinuity (3×3 range at most ``jump``) span, with the window's minimum, more
+    than ``jump`` pixels per view step (three surfaces).
 
-    The pixels that may choose a part (a finite ``mid_b``, on the background side) are few:
-    their window sums are gathered for a fixed-size list of them (the first
-    ``max(4096, H·W / 16)`` in row-major order; the others keep the whole side), and only
-    from the padded inputs, not from `boundary_matte`'s full-frame sums, which XLA's CPU
-    backend would recompute for every such use (the matte then takes several times as
-    long). The foreground colour of the part test is the window mean of the foreground
-    side's pixels.
+    Args:
+        disparity: ``(H, W)`` float disparity (pixels per view step).
+        radius, jump: as `boundary_matte`'s.
+        capacity: length of the list (static int >= 1); default ``max(1024, H·W / 256)``
+            (at most ``H·W``). Real 512² views have about 5–150 such pixels.
+
+    Returns:
+        ``(capacity,)`` int32: the row-major flat indices of the first ``capacity`` such
+        pixels in order, padded with ``H·W`` (`pixel_subset`). jit/vmap-able.
+
+    Raises:
+        ValueError: on a non-2-D disparity, ``radius < 1`` or ``capacity < 1``.
+    """
+    d = jnp.asarray(disparity)
+    if d.ndim != 2:
+        raise ValueError(f"disparity must have shape (H, W); got {tuple(d.shape)}")
+    radius = int(radius)
+    if radius < 1:
+        raise ValueError(f"radius must be >= 1; got {radius}")
+    n = d.size
+    capacity = min(n, max(1024, -(-n // 256))) if capacity is None else int(capacity)
+    if capacity < 1:
+        raise ValueError(f"capacity must be >= 1; got {capacity}")
+
+    def may_choose(d):
+        lo, hi = _window_extrema(d, radius)
+        lo1, hi1 = _window_extrema(d, 1)
+        mid = 0.5 * (lo + hi)
+        bg_hi = _background_extent(d, (hi1 - lo1) <= jump, mid, radius)
+        return (bg_hi - lo > jump) & (d <= mid)
+
+    # The mask as the branch of a `lax.cond` whose predicate XLA cannot fold (a finite map's
+    # first value equals itself), so that it is materialised: fused into `pixel_subset`,
+    # XLA's CPU backend recomputes its window pass there (~6x the time of both). Under
+    # `vmap` the cond becomes a select and the mask is fused again (correct, slower).
+    mask = lax.cond(d[0, 0] == d[0, 0], may_choose, lambda d: jnp.zeros(d.shape, bool), d)
+    return pixel_subset(mask.ravel(), capacity)
+
+
+def _split_background(
+    d, idx, jump, mid, lo1, hi1, gc, d_p, g_p, p_p, r, spatial_sigma, min_separation,
+    background, background_valid,
+):  # fmt: skip
+    """`boundary_matte`'s ``split_background`` for this view (index 0 of its stacks), at
+    the listed pixels ``idx`` (`split_candidates`).
+
+    The window sums of the two parts are gathered for the listed pixels only, from the
+    padded inputs, not from `boundary_matte`'s full-frame sums, which XLA's CPU backend
+    would recompute for every such use. The foreground colour of the part tests is the
+    window mean of the foreground side's pixels.
 
     Args: the maps of `boundary_matte` (``gc``: this view's colour planes; ``d_p``, ``g_p``,
     ``p_p``: the map, this view's colour planes and the purities, padded by ``r``).
@@ -359,16 +415,30 @@ def _split_background(
     n = H * W
     Wp = W + 2 * r
     C = len(gc)
-    capacity = min(n, max(1024, -(-n // 256)))
-    may_choose = jnp.isfinite(mid_b) & (d <= mid)
-    idx = pixel_subset(may_choose.ravel(), capacity)  # padded with n
-    at = jnp.minimum(idx, n - 1)
+    at = jnp.clip(idx, 0, n - 1)
     iy, ix = at // W, at % W
 
     def pick(x):
         return x.ravel()[at]
 
-    threshold, upper = pick(mid_b), pick(mid)
+    # The background side's far/near threshold at each listed pixel: the mid-range of the
+    # window's minimum and the largest background disparity of its pure pixels (the
+    # pixel itself excluded); +inf where those span no more than ``jump``.
+    upper = pick(mid)
+    lo_w = jnp.full(idx.shape, jnp.inf, d.dtype)
+    bg_hi = jnp.full(idx.shape, -jnp.inf, d.dtype)
+    pure = edge_pad(((hi1 - lo1) <= jump).astype(d.dtype), r) > 0
+    flat_pure = jnp.where(pure, d_p, -jnp.inf).ravel()
+    flat_d = d_p.ravel()
+    for a in range(-r, r + 1):
+        for b in range(-r, r + 1):
+            fi = (iy + r + a) * Wp + (ix + r + b)
+            lo_w = jnp.minimum(lo_w, flat_d[fi])
+            if a == 0 and b == 0:
+                continue
+            dp = flat_pure[fi]
+            bg_hi = jnp.maximum(bg_hi, jnp.where(dp <= upper, dp, -jnp.inf))
+    threshold = jnp.where(bg_hi - lo_w > jump, 0.5 * (lo_w + bg_hi), jnp.inf)
     zeros = jnp.zeros(idx.shape, d.dtype)
     w0 = w1 = d1 = w2 = d2 = zeros
     c0 = [zeros] * C
@@ -407,7 +477,8 @@ def _split_background(
     t = sum((B_far[c] - B_near[c]) * axis[c] for c in range(C))
     t = jnp.clip(t / jnp.maximum(sum(x * x for x in axis), tiny), 0.0, 1.0)
     off_segment = sum((B_far[c] - B_near[c] - t * axis[c]) ** 2 for c in range(C))
-    distinct = (idx < n) & (w0 > 0) & (w1 > 0) & (w2 > 0) & (off_segment > min_separation**2)
+    listed = (idx >= 0) & (idx < n) & (pick(d) <= upper)
+    distinct = listed & (w0 > 0) & (w1 > 0) & (w2 > 0) & (off_segment > min_separation**2)
     if background is not None:
         # The observed background is the 3×3 window's farthest surface: the far part's,
         # unless that surface lies in the near part (the far one is then off the 3×3).
@@ -429,8 +500,10 @@ def _split_background(
 
     near = segment_distance(B_near) < segment_distance(B_far)
 
+    inside = jnp.where((idx >= 0) & (idx < n), idx, n)
+
     def frame(value):
-        return jnp.zeros((n,), value.dtype).at[idx].set(value, mode="drop").reshape(H, W)
+        return jnp.zeros((n,), value.dtype).at[inside].set(value, mode="drop").reshape(H, W)
 
     colour = [frame(jnp.where(near, x2, x1)) for x2, x1 in zip(B_near, B_far, strict=True)]
     return (

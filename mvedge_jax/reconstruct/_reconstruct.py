@@ -42,6 +42,7 @@ from ._matte import (
     pixel_subset,
     samples_to_frame,
     smooth_surface,
+    split_candidates,
 )
 from ._photo import (
     _window_extrema,
@@ -555,6 +556,7 @@ def _matte(
     others: tuple[Array, Array] | None = None,
     fits: tuple[float, float] = (0.0, 0.0),
     split: bool = False,
+    split_at: Array | None = None,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
@@ -562,7 +564,7 @@ def _matte(
     views' ``(colours, weights)`` (`near_surface_colours`), and the ``(foreground,
     background)`` strengths of the sides' colour fits (``*_fit``), and whether a background
     side that holds two surfaces is split (``split``, `boundary_matte`'s
-    ``split_background``)."""
+    ``split_background``, at the pixels ``split_at``: its ``split_pixels``)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     other, weight = (None, None) if others is None else others
@@ -584,6 +586,7 @@ def _matte(
         foreground_fit=fits[0],
         background_fit=fits[1],
         split_background=split,
+        split_pixels=split_at,
     )
 
 
@@ -625,15 +628,35 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     same = sc.matte_colour == config.colour_space
     jump, snap = sc.matte_view_jump, sc.matte_view_snap
     fits = (sc.matte_view_foreground_fit, sc.matte_view_background_fit)
+    split = sc.matte_view_split
+    # The pixels where each view's matte may split its background side, listed for every
+    # view before the matte's loop (inside it XLA's CPU backend fuses the list's window
+    # pass into the matte, which then takes ~50 % longer), one view at a time (under `vmap`
+    # `split_candidates`' mask is fused into its list and recomputed, ~5x as long).
+    split_at = ()
+    if split:
+        split_at = (
+            lax.map(
+                lambda m: split_candidates(m, radius=sc.matte_radius, jump=jump),
+                disparity[r_j, c_j],
+            ),
+        )
     if sc.matte_view_steps == 0:
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         return _map_views(
-            lambda pair: _matte(
-                pair[0], pair[1], config, jump, snap, fits=fits, split=sc.matte_view_split
-            ),
-            (disparity[r_j, c_j], own),
+            lambda args: _matte(
+                args[0],
+                args[1],
+                config,
+                jump,
+                snap,
+                fits=fits,
+                split=split,
+                split_at=args[2] if split else None,
+            ),  # fmt: skip
+            (disparity[r_j, c_j], own, *split_at),
             disparity,
             present,
             (r_j, c_j),
@@ -672,13 +695,14 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     )(r_j, c_j, flat, back_d)
 
     def one(args):
-        d, guide, f, col, ok = args
+        d, guide, f, col, ok = args[:5]
         background = samples_to_frame(f, col, ok, (H, W))
         return _matte(
-            d, guide, config, jump, snap, background, fits=fits, split=sc.matte_view_split
-        )
+            d, guide, config, jump, snap, background, fits=fits, split=split,
+            split_at=args[5] if split else None,
+        )  # fmt: skip
 
-    inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid)
+    inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid, *split_at)
     return _map_views(one, inputs, disparity, present, (r_j, c_j))
 
 

@@ -14,6 +14,7 @@ from mvedge_jax.reconstruct import (
     boundary_matte,
     near_surface_colours,
     observed_background,
+    split_candidates,
 )
 from mvedge_jax.reconstruct._centre import colour_guide
 from mvedge_jax.reconstruct._matte import LIST_STEPS, largest_jumps, pixel_subset
@@ -809,8 +810,8 @@ def test_matte_split_needs_the_mean_colours():
     with pytest.raises(ValueError, match="background_fit"):
         boundary_matte(jnp.asarray(gt), jnp.asarray(img), split_background=True, background_fit=1.0)
     with pytest.raises(ValueError, match="matte_view_background_fit"):
-        SharpenConfig(matte_view_background_fit=1.0, matte_view_split=True)
-    SharpenConfig(matte_view_background_fit=1.0)
+        SharpenConfig(matte_view_background_fit=1.0)  # matte_view_split is the default
+    SharpenConfig(matte_view_background_fit=1.0, matte_view_split=False)
 
 
 def test_views_matte_splits_the_background_when_configured():
@@ -853,3 +854,54 @@ def test_matte_split_gradient_matches_finite_differences():
 
     assert np.abs(np.asarray(matte(jnp.asarray(d))) - d).max() > 0.01  # the means are taken
     check_grads(matte, (jnp.asarray(d),), order=1, modes=["rev"], eps=1e-3, atol=2e-2, rtol=2e-2)
+
+
+def test_split_candidates_list_the_background_pixels_of_three_surface_windows():
+    d, _ = _strip_scene(WALL_RGB)
+    H, W = d.shape
+    idx = np.asarray(split_candidates(jnp.asarray(d), jump=0.5, capacity=H * W))
+    listed = np.zeros(H * W, bool)
+    listed[idx[idx < H * W]] = True
+    listed = listed.reshape(H, W)
+    # The strip and the floor row whose 5×5 windows reach the object above and a pure floor
+    # pixel (rows 10–11); not the object, nor the floor below (row 12's window holds the
+    # strip and the floor only, and the floor is its foreground side).
+    np.testing.assert_array_equal(np.nonzero(listed.any(axis=1))[0], [10, 11])
+    assert listed[10:12].all()
+    # Two surfaces only: none. A short list keeps the first pixels in row-major order.
+    gt, _ = _edge_scene(10.3)
+    assert (np.asarray(split_candidates(jnp.asarray(gt), jump=0.5)) == gt.size).all()
+    short = np.asarray(split_candidates(jnp.asarray(d), jump=0.5, capacity=5))
+    np.testing.assert_array_equal(short, idx[:5])
+    # Under vmap (a select instead of the cond) the lists are the same.
+    flipped = d[::-1].copy()  # the same scene upside down: the floor above the object
+    both = jax.vmap(lambda m: split_candidates(m, jump=0.5, capacity=H * W))(
+        jnp.stack([d, flipped])
+    )
+    np.testing.assert_array_equal(np.asarray(both[0]), idx)
+    np.testing.assert_array_equal(
+        np.asarray(both[1]),
+        np.asarray(split_candidates(jnp.asarray(flipped), jump=0.5, capacity=H * W)),
+    )
+    with pytest.raises(ValueError, match="shape"):
+        split_candidates(jnp.zeros((2, 3, 4)))
+    with pytest.raises(ValueError, match="capacity"):
+        split_candidates(jnp.asarray(d), capacity=0)
+
+
+def test_matte_split_at_listed_pixels_only():
+    # Given an empty list, the split changes nothing; given the candidates, it is the
+    # default's.
+    d, img = _strip_scene(WALL_RGB)
+    kw = dict(jump=0.5, snap=0.0, split_background=True)
+    none = jnp.full((8,), d.size, jnp.int32)
+    np.testing.assert_allclose(
+        np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img), split_pixels=none, **kw)),
+        _views_matte(d, img, False),
+        atol=1e-5,
+    )
+    listed = split_candidates(jnp.asarray(d), jump=0.5)
+    np.testing.assert_array_equal(
+        np.asarray(boundary_matte(jnp.asarray(d), jnp.asarray(img), split_pixels=listed, **kw)),
+        _views_matte(d, img, True),
+    )
