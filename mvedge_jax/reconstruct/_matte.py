@@ -286,14 +286,9 @@ def boundary_matte(
         # observed surface is the other part.
         where = background_valid if chosen is None else background_valid & ~chosen
         B = [x.at[0].set(jnp.where(where, background[..., c], x[0])) for c, x in enumerate(B)]
-
-    def model(B):
-        sep = [F[c] - B[c] for c in range(C)]
-        sep_all = sum(x * x for x in sep)
-        alpha_all = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep_all, tiny)
-        return sep, sep_all, alpha_all
-
-    sep, sep_all, alpha_all = model(B)
+    sep = [F[c] - B[c] for c in range(C)]
+    sep_all = sum(x * x for x in sep)
+    alpha_all = sum((gc[c] - B[c]) * sep[c] for c in range(C)) / jnp.maximum(sep_all, tiny)
     sep2, alpha = sep_all[0], alpha_all[0]
     sep, gc, B = [x[0] for x in sep], [x[0] for x in gc], [x[0] for x in B]
     # Two-colour model test: the pixel's colour must lie near the line through B and F.
@@ -444,7 +439,7 @@ def _split_background(
     c0 = [zeros] * C
     c1 = [zeros] * C
     c2 = [zeros] * C
-    flat_d, flat_p, flat_g = d_p.ravel(), p_p.ravel(), [x.ravel() for x in g_p]
+    flat_p, flat_g = p_p.ravel(), [x.ravel() for x in g_p]
     for a in range(-r, r + 1):
         for b in range(-r, r + 1):
             if a == 0 and b == 0:
