@@ -275,7 +275,7 @@ def boundary_matte(
     chosen = None
     if split_background:
         chosen, part_colour, part_w, part_d = _split_background(
-            d, split_pixels, jump, mid, lo1, hi1, [x[0] for x in gc], d_p,
+            d, split_pixels, jump, lo, mid, lo1, hi1, [x[0] for x in gc], d_p,
             [x[0] for x in g_p], p_p, r, spatial_sigma, min_separation, background,
             background_valid,
         )  # fmt: skip
@@ -387,7 +387,7 @@ def split_candidates(
 
 
 def _split_background(
-    d, idx, jump, mid, lo1, hi1, gc, d_p, g_p, p_p, r, spatial_sigma, min_separation,
+    d, idx, jump, lo, mid, lo1, hi1, gc, d_p, g_p, p_p, r, spatial_sigma, min_separation,
     background, background_valid,
 ):  # fmt: skip
     """`boundary_matte`'s ``split_background`` for this view (index 0 of its stacks), at
@@ -416,24 +416,14 @@ def _split_background(
     def pick(x):
         return x.ravel()[at]
 
-    # The background side's far/near threshold at each listed pixel: the mid-range of the
-    # window's minimum and the largest background disparity of its pure pixels (the
-    # pixel itself excluded); +inf where those span no more than ``jump``.
+    # The background side's far/near threshold at each listed pixel, as `split_candidates`
+    # finds it: +inf where the part does not exist. Gathered, the full-frame window pass
+    # of `_background_extent` is evaluated at the listed pixels only.
     upper = pick(mid)
-    lo_w = jnp.full(idx.shape, jnp.inf, d.dtype)
-    bg_hi = jnp.full(idx.shape, -jnp.inf, d.dtype)
-    pure = edge_pad(((hi1 - lo1) <= jump).astype(d.dtype), r) > 0
-    flat_pure = jnp.where(pure, d_p, -jnp.inf).ravel()
-    flat_d = d_p.ravel()
-    for a in range(-r, r + 1):
-        for b in range(-r, r + 1):
-            fi = (iy + r + a) * Wp + (ix + r + b)
-            lo_w = jnp.minimum(lo_w, flat_d[fi])
-            if a == 0 and b == 0:
-                continue
-            dp = flat_pure[fi]
-            bg_hi = jnp.maximum(bg_hi, jnp.where(dp <= upper, dp, -jnp.inf))
+    lo_w = pick(lo)
+    bg_hi = pick(_background_extent(d, (hi1 - lo1) <= jump, mid, r))
     threshold = jnp.where(bg_hi - lo_w > jump, 0.5 * (lo_w + bg_hi), jnp.inf)
+    flat_d = d_p.ravel()
     zeros = jnp.zeros(idx.shape, d.dtype)
     w0 = w1 = d1 = w2 = d2 = zeros
     c0 = [zeros] * C
