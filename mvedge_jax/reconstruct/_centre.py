@@ -175,13 +175,23 @@ def splat_mask(
     ``centre.splat_colour`` (Euclidean, guide units) gets no weight: a uniform region has
     no label of its own, so a label that lands on it sets its whole disparity. Elsewhere
     the coefficients stay bilinear. ``centre.splat_uniform = 0`` turns the test off.
-    Not in the thesis (docs/ACCURACY.md, "Splat off uniform regions").
+
+    With ``centre.splat_side_ratio = ρ > 0``, a corner also gets no weight wherever its
+    colour differs from the point's own surface by more than ``centre.splat_colour`` and
+    lies nearer the colour across the edge (the guide at ``p − 2n``) than ``ρ`` times its
+    distance to the own surface's: the corner shows the other side, as where a point is
+    placed a pixel or two off its colour edge and its splat lands beyond it (a strip of
+    uniform floor between a wall and a nearer panel, too narrow for the uniform-region
+    test). ``ρ = 0`` (the default) turns this test off.
+    Not in the thesis (docs/ACCURACY.md, "Splat off uniform regions", "Splat corners that
+    show the other side").
 
     Args:
         guide: ``(H, W, C)`` colour guide on the solve grid (``k×`` the centre view).
         edges: `EdgeSet` (centre-view positions).
         offset: ``(N, 2)`` surface vectors.
-        config: `ReconstructConfig` (``centre.splat_uniform``, ``centre.splat_colour``).
+        config: `ReconstructConfig` (``centre.splat_uniform``, ``centre.splat_colour``,
+            ``centre.splat_side_ratio``).
         k: the solve grid's factor (``centre.upsample``).
 
     Returns:
@@ -198,10 +208,15 @@ def splat_mask(
     across = _side_pixel(edges, offset, -SIDE_DISTANCE, k, shape)
     uniform = uniform_window(guide)[across] < config.centre.splat_uniform
     limit = jnp.square(config.centre.splat_colour)
+    other = [p[across] for p in planes]
+    ratio2 = jnp.square(config.centre.splat_side_ratio)
 
     def corner_scale(col: Array, row: Array) -> Array:
-        far = sum(jnp.square(p[row, col] - o) for p, o in zip(planes, own, strict=True)) > limit
-        return jnp.where(uniform & far, 0.0, 1.0).astype(guide.dtype)
+        d_own = sum(jnp.square(p[row, col] - o) for p, o in zip(planes, own, strict=True))
+        d_other = sum(jnp.square(p[row, col] - o) for p, o in zip(planes, other, strict=True))
+        far = d_own > limit
+        other_side = d_other < ratio2 * d_own
+        return jnp.where(far & (uniform | other_side), 0.0, 1.0).astype(guide.dtype)
 
     return corner_scale
 

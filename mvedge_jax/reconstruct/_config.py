@@ -44,11 +44,19 @@ class CentreConfig(eqx.Module):
             (guide units; `uniform_window`); 0 turns the test off (`splat_mask`).
         splat_colour: (threshold) there, a splat corner whose colour differs from the
             label's own surface by more than this (Euclidean, guide units) gets no weight.
+        splat_side_ratio: (threshold, dimensionless) such a corner (colour off the label's
+            own surface by more than ``splat_colour``) also gets no weight, wherever the
+            pixel 2 px across the edge lies, if its colour distance to that pixel is below
+            this times its distance to the own surface's colour: the corner shows the other
+            side (`splat_mask`). 0 (the default) turns the test off; 0.1 takes the
+            synthetic textureless scenes' all-views MSE×100 down 3–9× and moves the
+            textured scenes by −1 to +1.5 % (docs/ACCURACY.md, "Splat corners that show the
+            other side").
         upsample: (static) solve the centre problem on an ``upsample×`` grid (1 or 2) and
             average back (sub-pixel label placement).
         solver: `SolverConfig` of the centre-view solve (2-D, multigrid by default).
 
-    The array fields are differentiable except the two thresholds.
+    The array fields are differentiable except the three thresholds.
 
     Raises:
         TypeError, ValueError: on construction, for a value of the wrong type or out of
@@ -67,6 +75,7 @@ class CentreConfig(eqx.Module):
     conf_beta: Array = hyperparameter(10.0, differentiable=True, lower=0.0)
     splat_uniform: Array = hyperparameter(0.02, differentiable=False, lower=0.0)
     splat_colour: Array = hyperparameter(0.05, differentiable=False, lower=0.0)
+    splat_side_ratio: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     upsample: int = static(1, lower=1, upper=2)
     solver: SolverConfig = SolverConfig()
 

@@ -162,6 +162,53 @@ def test_splat_stays_bilinear_next_to_a_textured_region():
     np.testing.assert_array_equal(lam[0], lam[1])
 
 
+def _panel_floor_strip(floor_noise: float):
+    """`_panel_on_floor` with the floor cut to a strip of three columns (20–22) before a
+    blue wall (columns 23–39): the pixel 2 px across the panel's labels (column 22) lies
+    on the strip, whose 3×3 windows all touch the panel or the wall, so the uniform-region
+    test does not act."""
+    img, edges, surface, truth, split = _panel_on_floor(floor_noise)
+    img[:, split + 4 :] = [0.2, 0.3, 0.8]
+    return img, edges, surface, split
+
+
+def test_splat_side_ratio_drops_corners_that_show_the_other_side():
+    img, edges, surface, split = _panel_floor_strip(0.0)
+    assert float(uniform_window(jnp.asarray(img))[0, split + 2]) > 0.1  # no uniform region
+    lam = {
+        r: np.asarray(
+            centre_problem(
+                edges,
+                surface,
+                jnp.asarray(img),
+                ReconstructConfig(centre=CentreConfig(splat_side_ratio=r)),
+            )[0]
+        )
+        for r in (0.0, 0.1)
+    }
+    # Off: the strip's column next to the panel takes 0.4 of every panel label.
+    assert np.all(lam[0.0][:, split + 1] > 0)
+    # On: that corner has the colour of the pixel across the edge (the strip) and loses its
+    # weight; the corner on the panel (the label's own colour) keeps its own.
+    assert np.all(lam[0.1][:, split + 1] == 0)
+    np.testing.assert_array_equal(lam[0.1][:, split], lam[0.0][:, split])
+    np.testing.assert_array_equal(lam[0.1][:, split + 2 :], lam[0.0][:, split + 2 :])
+
+
+def test_splat_side_ratio_keeps_corners_on_a_textured_strip():
+    # With texture on the strip the corner's colour is no nearer the pixel across the edge
+    # than a tenth of its distance to the panel's colour: the splat stays bilinear.
+    img, edges, surface, split = _panel_floor_strip(0.1)
+    lam = [
+        np.asarray(centre_problem(edges, surface, jnp.asarray(img), cfg)[0])
+        for cfg in (
+            ReconstructConfig(),
+            ReconstructConfig(centre=CentreConfig(splat_side_ratio=0.1)),
+        )
+    ]
+    np.testing.assert_array_equal(lam[0], lam[1])
+
+
 def test_uniform_window():
     img = np.full((6, 7, 3), 0.5, np.float32)
     img[:, 4:] = 0.8  # a step between columns 3 and 4
