@@ -555,16 +555,15 @@ def _matte(
     background: tuple[Array, Array] | None = None,
     others: tuple[Array, Array] | None = None,
     fits: tuple[float, float] = (0.0, 0.0),
-    split: bool = False,
     split_at: Array | None = None,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
     optionally an observed ``(background colour, valid)`` (`observed_background`) and other
     views' ``(colours, weights)`` (`near_surface_colours`), and the ``(foreground,
-    background)`` strengths of the sides' colour fits (``*_fit``), and whether a background
-    side that holds two surfaces is split (``split``, `boundary_matte`'s
-    ``split_background``, at the pixels ``split_at``: its ``split_pixels``)."""
+    background)`` strengths of the sides' colour fits (``*_fit``); with ``split_at``, a
+    background side that holds two surfaces is split at those pixels (`boundary_matte`'s
+    ``split_background`` with ``split_pixels``)."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     other, weight = (None, None) if others is None else others
@@ -585,7 +584,7 @@ def _matte(
         align_tolerance=sc.matte_align_tolerance,
         foreground_fit=fits[0],
         background_fit=fits[1],
-        split_background=split,
+        split_background=split_at is not None,
         split_pixels=split_at,
     )
 
@@ -647,15 +646,8 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         return _map_views(
             lambda args: _matte(
-                args[0],
-                args[1],
-                config,
-                jump,
-                snap,
-                fits=fits,
-                split=split,
-                split_at=args[2] if split else None,
-            ),  # fmt: skip
+                *args[:2], config, jump, snap, fits=fits, split_at=args[2] if split else None
+            ),
             (disparity[r_j, c_j], own, *split_at),
             disparity,
             present,
@@ -698,9 +690,8 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
         d, guide, f, col, ok = args[:5]
         background = samples_to_frame(f, col, ok, (H, W))
         return _matte(
-            d, guide, config, jump, snap, background, fits=fits, split=split,
-            split_at=args[5] if split else None,
-        )  # fmt: skip
+            d, guide, config, jump, snap, background, fits=fits, split_at=args[5] if split else None
+        )
 
     inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid, *split_at)
     return _map_views(one, inputs, disparity, present, (r_j, c_j))
