@@ -129,6 +129,15 @@ class SharpenConfig(eqx.Module):
             centre map's matte: the other views count where the window's largest disparity
             lies within this fraction of the two sides' difference of the foreground side's
             mean (dimensionless).
+        matte_soft: (threshold) `boundary_matte`'s ``soft`` for the centre map: a decided
+            pixel whose mixture fraction ``α`` lies within ``matte_soft / 2`` of 1/2 takes
+            the blend ``p V_F + (1 − p) V_B`` of the values it would take on either side,
+            ``p = 1/2 + (α − 1/2) / matte_soft`` (dimensionless): the value of least expected
+            squared error where the colours leave the side uncertain. Lowers the MSE and
+            raises the bad pixels at a tight threshold (the blended values lie on neither
+            surface). 0: every decided pixel takes one side's value.
+        matte_view_soft: (threshold) the same for the maps of the other views
+            (``matte_views``).
         sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
             view step. Smooth where the chosen hypothesis does not change (the hypotheses
             scale with it).
@@ -249,6 +258,8 @@ class SharpenConfig(eqx.Module):
     matte_max_residual: Array = hyperparameter(1e9, differentiable=False, lower=0.0)
     matte_phase: Array = hyperparameter(0.5, differentiable=False, lower=0.0, lower_open=True)
     matte_align_tolerance: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
+    matte_soft: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
+    matte_view_soft: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
     sweep_support_jump: Array = hyperparameter(0.1, differentiable=False, lower=0.0)

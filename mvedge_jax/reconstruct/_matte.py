@@ -33,6 +33,7 @@ def boundary_matte(
     background_fit: float = 0.0,
     split_background: bool = False,
     split_pixels: Int[ArrayLike, " K"] | None = None,
+    soft: float | Array = 0.0,
 ) -> Float[Array, "H W"]:
     """Decide the side of every pixel on a depth discontinuity from its colour mixture.
 
@@ -106,6 +107,14 @@ def boundary_matte(
     side). Without the split the two background surfaces' mixed mean colour can resemble
     the foreground's, and their mean disparity lies between them.
 
+    With ``soft > 0``, a decided pixel whose ``α`` lies within ``soft / 2`` of 1/2 takes
+    ``p V_F + (1 − p) V_B`` with ``p = 1/2 + (α − 1/2) / soft``, ``V_F`` and ``V_B`` the
+    values it takes when decided to the foreground and to the background (its own value on
+    its side, else the side's mean, as ``snap`` says). Where the mixture leaves the side
+    uncertain, a value between the two surfaces has a lower expected squared error than
+    either; it is off both surfaces, so such pixels count as bad pixels at a tight
+    threshold. Outside that band, and with ``soft = 0``, the pixel takes one side's value.
+
     One pass; jit/vmap-able. Not differentiable in the side chosen (a selection); the output
     is piecewise a weighted mean of the input.
 
@@ -149,6 +158,8 @@ def boundary_matte(
             ``split_background``; ``None``: `split_candidates` of ``disparity`` here. A list
             made before a loop over views is materialised once, where XLA's CPU backend
             would recompute the candidates' window pass inside this function.
+        soft: width (in ``α``, dimensionless, >= 0) of the band around 1/2 in which a
+            decided pixel takes the blend of its two sides' values; 0: one side's value.
 
     Returns:
         ``(H, W)`` disparity, same dtype as ``disparity``.
@@ -158,7 +169,7 @@ def boundary_matte(
             ``spatial_sigma <= 0``, or ``background`` / ``background_valid`` of another shape
             or given without the other, or ``others`` / ``other_weights`` likewise, or a
             fit strength that is negative or not finite, or ``split_background`` with
-            ``background_fit`` above 0.
+            ``background_fit`` above 0, or a negative ``soft`` (a Python number).
     """
     d = jnp.asarray(disparity)
     g = jnp.asarray(guide, d.dtype)
@@ -171,6 +182,8 @@ def boundary_matte(
         raise ValueError(f"radius must be >= 1; got {radius}")
     if not spatial_sigma > 0:
         raise ValueError(f"spatial_sigma must be > 0; got {spatial_sigma}")
+    if isinstance(soft, (int, float)) and not soft >= 0:
+        raise ValueError(f"soft must be >= 0; got {soft}")
     strength = {"f": float(foreground_fit), "b": float(background_fit)}
     for side, name in (("f", "foreground_fit"), ("b", "background_fit")):
         if not 0 <= strength[side] < float("inf"):
@@ -314,7 +327,14 @@ def boundary_matte(
     # takes the mean.
     side = jnp.where(alpha > 0.5, d_f, d_b)
     move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
-    return jnp.where(decide & move, side, d)
+    out = jnp.where(decide & move, side, d)
+    # The soft band: the blend of the values the pixel takes on either side.
+    limit = snap * jnp.abs(d_f - d_b)
+    v_f = jnp.where(is_fg & (jnp.abs(d - d_f) <= limit), d, d_f)
+    v_b = jnp.where(~is_fg & (jnp.abs(d - d_b) <= limit), d, d_b)
+    p = jnp.clip(0.5 + (alpha - 0.5) / jnp.where(soft > 0, soft, 1.0), 0.0, 1.0)
+    uncertain = decide & (jnp.abs(alpha - 0.5) < 0.5 * soft)
+    return jnp.where(uncertain, p * v_f + (1.0 - p) * v_b, out)
 
 
 def _background_extent(d: Array, pure: Array, mid: Array, radius: int) -> Array:

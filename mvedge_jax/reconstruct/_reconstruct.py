@@ -556,6 +556,7 @@ def _matte(
     others: tuple[Array, Array] | None = None,
     fits: tuple[float, float] = (0.0, 0.0),
     split_at: Array | None = None,
+    soft: Array | float = 0.0,
 ) -> Array:
     """`boundary_matte` of one view's map (``guide``: the view's `colour_guide`) with the
     config's settings, the discontinuity threshold ``jump``, the ``snap`` fraction and
@@ -563,7 +564,8 @@ def _matte(
     views' ``(colours, weights)`` (`near_surface_colours`), and the ``(foreground,
     background)`` strengths of the sides' colour fits (``*_fit``); with ``split_at``, a
     background side that holds two surfaces is split at those pixels (`boundary_matte`'s
-    ``split_background`` with ``split_pixels``)."""
+    ``split_background`` with ``split_pixels``); ``soft``: `boundary_matte`'s band of
+    blended values."""
     sc = config.sharpen
     colour, valid = (None, None) if background is None else background
     other, weight = (None, None) if others is None else others
@@ -586,6 +588,7 @@ def _matte(
         background_fit=fits[1],
         split_background=split_at is not None,
         split_pixels=split_at,
+        soft=soft,
     )
 
 
@@ -640,14 +643,26 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
                 disparity[r_j, c_j],
             ),
         )
+
+    def view_matte(d, guide, background, split_px):
+        return _matte(
+            d,
+            guide,
+            config,
+            jump,
+            snap,
+            background,
+            fits=fits,
+            split_at=split_px,
+            soft=sc.matte_view_soft,
+        )
+
     if sc.matte_view_steps == 0:
         # The maps and guides are gathered before the loop: slicing them by the loop's
         # traced index inside `lax.map` is ~25 % slower on XLA's CPU backend.
         own = guides[r_j, c_j] if same else colour_guide(views[r_j, c_j], sc.matte_colour)
         return _map_views(
-            lambda args: _matte(
-                *args[:2], config, jump, snap, fits=fits, split_at=args[2] if split else None
-            ),
+            lambda args: view_matte(*args[:2], None, args[2] if split else None),
             (disparity[r_j, c_j], own, *split_at),
             disparity,
             present,
@@ -689,9 +704,7 @@ def _matte_views(disparity: Array, views: Array, guides: Array, present: Array, 
     def one(args):
         d, guide, f, col, ok = args[:5]
         background = samples_to_frame(f, col, ok, (H, W))
-        return _matte(
-            d, guide, config, jump, snap, background, fits=fits, split_at=args[5] if split else None
-        )
+        return view_matte(d, guide, background, args[5] if split else None)
 
     inputs = (disparity[r_j, c_j], matte_guides[r_j, c_j], flat, colour, valid, *split_at)
     return _map_views(one, inputs, disparity, present, (r_j, c_j))
@@ -763,6 +776,7 @@ def _sharpen(views: Array, centre: Array, config: ReconstructConfig) -> Array:
             sc.matte_snap,
             others=_matte_others(sharp, views, config),
             fits=(sc.matte_foreground_fit, sc.matte_background_fit),
+            soft=sc.matte_soft,
         )
     if sc.sweep_steps:
         pos = _sweep_positions(U, V, sc.sweep_min_offset)

@@ -179,7 +179,7 @@ def test_paths_get_replace_and_with_values():
     assert "edges.filter.presmooth_sigma" in paths and "reconstruct.centre.omega" in paths
     assert "edges.label.min_confidence" in hyperparameter_paths(differentiable=False)
     assert "reconstruct.epi.min_confidence" in hyperparameter_paths(differentiable=False)
-    assert len(set(hyperparameter_paths())) == len(hyperparameter_paths()) == 84
+    assert len(set(hyperparameter_paths())) == len(hyperparameter_paths()) == 86
     assert set(paths).isdisjoint(hyperparameter_paths(differentiable=False))
     replaced = replace_paths(cfg, {"surface.offset": jnp.asarray(2.0)})
     assert float(get_path(replaced, "surface.offset")) == 2.0

@@ -151,6 +151,28 @@ def test_matte_snaps_values_between_the_two_surfaces(edge):
     np.testing.assert_array_equal(every[:, 15:], d[:, 15:])
 
 
+@pytest.mark.parametrize("edge", [10.03, 9.97])
+def test_matte_soft_blends_the_two_sides_where_the_mixture_is_uncertain(edge):
+    # Pixel 10 is 53 % foreground (on the foreground) or 47 % (on the background): within
+    # a band of 0.2 around 1/2 it takes the blend of the two sides' values,
+    # p = 1/2 + (α − 1/2) / 0.2; every other pixel, and pixel 10 with a band narrower than
+    # its |α − 1/2|, is decided as without the band.
+    gt, img = _edge_scene(edge)
+    d, img = jnp.asarray(gt), jnp.asarray(img)
+    kw = dict(impure_weight=0.0)  # pure side colours: α is the coverage
+    hard = np.asarray(boundary_matte(d, img, **kw))
+    np.testing.assert_array_equal(np.asarray(boundary_matte(d, img, soft=0.0, **kw)), hard)
+    np.testing.assert_allclose(hard, gt, atol=1e-5)
+    out = np.asarray(jax.jit(lambda x, g: boundary_matte(x, g, soft=0.2, **kw))(d, img))
+    alpha = edge - 9.5
+    p = 0.5 + (alpha - 0.5) / 0.2
+    np.testing.assert_allclose(out[:, 10], p * FG + (1 - p) * BG, atol=1e-4)
+    np.testing.assert_array_equal(np.delete(out, 10, axis=1), np.delete(hard, 10, axis=1))
+    np.testing.assert_array_equal(np.asarray(boundary_matte(d, img, soft=0.05, **kw)), hard)
+    with pytest.raises(ValueError, match="soft"):
+        boundary_matte(d, img, soft=-0.1)
+
+
 def test_matte_vmaps_over_views():
     gts, imgs = zip(*(_edge_scene(e) for e in (10.2, 10.8)), strict=True)
     d = jnp.asarray(np.stack([np.roll(g, 1, axis=1) for g in gts]))

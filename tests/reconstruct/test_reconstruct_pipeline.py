@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.ndimage import grey_dilation
+from scipy.ndimage import grey_dilation, maximum_filter, minimum_filter
 
 from mvedge_jax.reconstruct import (
     CentreConfig,
@@ -163,6 +163,27 @@ def test_view_matte_has_its_own_jump(small_scene):
     changed = np.any(np.asarray(same_as_centre.disparity != default.disparity), axis=(2, 3))
     assert changed[others].any() and not changed[~others].any()
     assert not np.array_equal(default.disparity, off.disparity)
+
+
+def test_soft_matte_blends_each_map_on_its_own_setting(small_scene):
+    # `matte_view_soft` blends the uncertain boundary pixels of the views other than the
+    # centre only, `matte_soft` those of the sharpened centre map; a blended value lies
+    # between the two sides of its window in the map the views' matte receives.
+    lf, run, others = _sharpen_runs(small_scene)
+    hard = run(matte_view_soft=0.0)
+    views = run(matte_view_soft=0.3)
+    centre = run(matte_view_soft=0.0, matte_soft=0.3)
+    np.testing.assert_array_equal(views.centre_sharp, hard.centre_sharp)
+    changed = np.asarray(views.disparity != hard.disparity)
+    assert changed[others].any() and not changed[~others].any()
+    before = np.asarray(run(matte_views=False).disparity)
+    lo = minimum_filter(before, size=(1, 1, 5, 5), mode="nearest")
+    hi = maximum_filter(before, size=(1, 1, 5, 5), mode="nearest")
+    out = np.asarray(views.disparity)
+    assert np.all((out[changed] >= lo[changed] - 1e-5) & (out[changed] <= hi[changed] + 1e-5))
+    blended = changed & (np.abs(out - lo) > 0.05) & (np.abs(out - hi) > 0.05)
+    assert blended.any()
+    assert not np.array_equal(centre.centre_sharp, hard.centre_sharp)
 
 
 def test_view_matte_takes_the_observed_background(small_scene):
