@@ -137,7 +137,8 @@ class SharpenConfig(eqx.Module):
             raises the bad pixels at a tight threshold (the blended values lie on neither
             surface). 0: every decided pixel takes one side's value.
         matte_view_soft: (threshold) the same for the maps of the other views
-            (``matte_views``).
+            (``matte_views``); 0.1 by default (chosen by leave-one-scene-out; the centre
+            map's stays 0: docs/ACCURACY.md, "Blended values where the matte is unsure").
         sweep_search: largest change the plane sweep (`photo_sweep`) may make, pixels per
             view step. Smooth where the chosen hypothesis does not change (the hypotheses
             scale with it).
@@ -259,7 +260,7 @@ class SharpenConfig(eqx.Module):
     matte_phase: Array = hyperparameter(0.5, differentiable=False, lower=0.0, lower_open=True)
     matte_align_tolerance: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     matte_soft: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
-    matte_view_soft: Array = hyperparameter(0.0, differentiable=False, lower=0.0)
+    matte_view_soft: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
     sweep_search: Array = hyperparameter(0.3, differentiable=True, lower=0.0, lower_open=True)
     sweep_margin: Array = hyperparameter(0.0, differentiable=False, lower=0.0, upper=1.0)
     sweep_support_jump: Array = hyperparameter(0.1, differentiable=False, lower=0.0)
