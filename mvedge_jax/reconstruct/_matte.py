@@ -323,18 +323,16 @@ def boundary_matte(
     # A pixel only joins a side that one of its 8 neighbours is on: where three surfaces
     # meet, the mean background of the window can look like the foreground's colour.
     decide = decide & jnp.where(alpha > 0.5, hi1 > mid, lo1 <= mid)
-    # A pixel off its chosen side, or on it but farther than ``snap`` from that side's mean,
-    # takes the mean.
-    side = jnp.where(alpha > 0.5, d_f, d_b)
-    move = (is_fg != (alpha > 0.5)) | (jnp.abs(d - side) > snap * jnp.abs(d_f - d_b))
-    out = jnp.where(decide & move, side, d)
-    # The soft band: the blend of the values the pixel takes on either side.
+    # The value a decided pixel takes on each side: its own where it is on that side within
+    # ``snap`` of the side's mean, else the mean.
     limit = snap * jnp.abs(d_f - d_b)
     v_f = jnp.where(is_fg & (jnp.abs(d - d_f) <= limit), d, d_f)
     v_b = jnp.where(~is_fg & (jnp.abs(d - d_b) <= limit), d, d_b)
+    # Within the soft band around 1/2, the blend of the two.
     p = jnp.clip(0.5 + (alpha - 0.5) / jnp.where(soft > 0, soft, 1.0), 0.0, 1.0)
-    uncertain = decide & (jnp.abs(alpha - 0.5) < 0.5 * soft)
-    return jnp.where(uncertain, p * v_f + (1.0 - p) * v_b, out)
+    uncertain = jnp.abs(alpha - 0.5) < 0.5 * soft
+    side = jnp.where(uncertain, p * v_f + (1.0 - p) * v_b, jnp.where(alpha > 0.5, v_f, v_b))
+    return jnp.where(decide, side, d)
 
 
 def _background_extent(d: Array, pure: Array, mid: Array, radius: int) -> Array:
